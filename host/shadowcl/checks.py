@@ -1,0 +1,59 @@
+"""Argument checks shared by the public API: each raises TypeError/ValueError naming the argument."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def finite_array(name: str, value, shape_tail: tuple[int, ...], dtype=np.float64) -> np.ndarray:
+    """``value`` as a float array of shape ``(N, *shape_tail)`` with only finite entries."""
+    try:
+        array = np.asarray(value)
+    except Exception as error:  # ragged lists and the like
+        raise TypeError(f"{name}: cannot be read as an array ({error})") from None
+    if array.dtype == object or not (np.issubdtype(array.dtype, np.number) or array.dtype == bool):
+        raise TypeError(f"{name}: expected a numeric array, got dtype {array.dtype}")
+    if np.issubdtype(array.dtype, np.complexfloating):
+        raise TypeError(f"{name}: expected real numbers, got dtype {array.dtype}")
+    expected = "(N, " + ", ".join(map(str, shape_tail)) + ")"
+    if array.ndim != 1 + len(shape_tail) or array.shape[1:] != shape_tail:
+        raise ValueError(f"{name}: expected shape {expected}, got {array.shape}")
+    array = array.astype(dtype, copy=False)
+    if not np.all(np.isfinite(array)):
+        bad = np.argwhere(~np.isfinite(array))[0]
+        raise ValueError(f"{name}: contains NaN or inf (first at index {tuple(int(i) for i in bad)})")
+    return array
+
+
+def vector3(name: str, value, nonzero: bool = False) -> np.ndarray:
+    """``value`` as a finite float64 3-vector (non-zero length if asked)."""
+    try:
+        array = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name}: expected three numbers, got {value!r}") from None
+    if array.shape != (3,):
+        raise ValueError(f"{name}: expected three numbers, got shape {array.shape}")
+    if not np.all(np.isfinite(array)):
+        raise ValueError(f"{name}: must be finite, got {array.tolist()}")
+    if nonzero and not np.linalg.norm(array) > 0:
+        raise ValueError(f"{name}: must have non-zero length, got {array.tolist()}")
+    return array
+
+
+def positive_int(name: str, value, minimum: int = 1, maximum: int | None = None) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name}: expected an integer, got {type(value).__name__}")
+    if value < minimum or (maximum is not None and value > maximum):
+        bound = f"between {minimum} and {maximum}" if maximum is not None else f"at least {minimum}"
+        raise ValueError(f"{name}: must be {bound}, got {value}")
+    return int(value)
+
+
+def positive_float(name: str, value) -> float:
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name}: expected a number, got {value!r}") from None
+    if not (np.isfinite(number) and number > 0):
+        raise ValueError(f"{name}: must be a finite positive number, got {value!r}")
+    return number

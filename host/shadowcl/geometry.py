@@ -1,0 +1,108 @@
+"""Triangle meshes: validation, loading, and the derived quantities methods need (bounds, normals)."""
+
+from __future__ import annotations
+
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+
+from .checks import finite_array
+
+MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off")
+
+
+class Mesh:
+    """A triangle mesh: ``vertices`` (V, 3) float32 and ``faces`` (F, 3) int32.
+
+    Inputs are validated (finite coordinates, integer indices within range, the right shapes, at least
+    one triangle). Degenerate triangles (zero area, repeated indices) are allowed: they cast no shadow,
+    and :attr:`degenerate_count` says how many there are.
+    """
+
+    def __init__(self, vertices, faces):
+        vertices = finite_array("vertices", vertices, (3,))
+        try:
+            faces_in = np.asarray(faces)
+        except Exception as error:
+            raise TypeError(f"faces: cannot be read as an array ({error})") from None
+        if faces_in.dtype == bool or not np.issubdtype(faces_in.dtype, np.integer):
+            raise TypeError(f"faces: expected integer vertex indices, got dtype {faces_in.dtype}")
+        if faces_in.ndim != 2 or faces_in.shape[1] != 3:
+            raise ValueError(f"faces: expected shape (F, 3), got {faces_in.shape}")
+        if len(faces_in) == 0:
+            raise ValueError("faces: the mesh is empty (no triangles)")
+        if len(vertices) == 0:
+            raise ValueError("vertices: the mesh has faces but no vertices")
+        low, high = int(faces_in.min()), int(faces_in.max())
+        if low < 0:
+            raise ValueError(f"faces: negative vertex index {low}")
+        if high >= len(vertices):
+            raise ValueError(f"faces: vertex index {high} out of range for {len(vertices)} vertices")
+        if np.abs(vertices).max() >= np.finfo(np.float32).max:
+            raise ValueError("vertices: coordinates overflow float32")
+        self.vertices = np.ascontiguousarray(vertices, dtype=np.float32)
+        self.faces = np.ascontiguousarray(faces_in, dtype=np.int32)
+        for array in (self.vertices, self.faces):
+            array.flags.writeable = False
+
+    @classmethod
+    def load(cls, path) -> "Mesh":
+        """Read an OBJ, PLY, STL or OFF file (through trimesh); polygons are fan-triangulated."""
+        import trimesh
+
+        path = Path(path)
+        if path.suffix.lower() not in MESH_SUFFIXES:
+            raise ValueError(f"path: unsupported mesh format {path.suffix!r}; expected one of {MESH_SUFFIXES}")
+        if not path.is_file():
+            raise FileNotFoundError(f"path: no mesh file at {path}")
+        # process=False keeps vertices and faces as written (no merging, no removal of degenerates).
+        loaded = trimesh.load(path, force="mesh", process=False)
+        return cls(np.asarray(loaded.vertices), np.asarray(loaded.faces))
+
+    def __repr__(self) -> str:
+        return f"Mesh({len(self.vertices)} vertices, {len(self.faces)} triangles)"
+
+    @property
+    def triangles(self) -> np.ndarray:
+        """(F, 3, 3) float64 corner positions."""
+        return self.vertices.astype(np.float64)[self.faces]
+
+    @cached_property
+    def face_normals(self) -> np.ndarray:
+        """(F, 3) float64 unit normals by the right-hand rule; zero for degenerate triangles."""
+        tri = self.triangles
+        normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        length = np.linalg.norm(normal, axis=1, keepdims=True)
+        return np.divide(normal, length, out=np.zeros_like(normal), where=length > 0)
+
+    @cached_property
+    def degenerate_count(self) -> int:
+        """Number of triangles with zero area (repeated indices or collinear corners)."""
+        return int(np.count_nonzero(~np.any(self.face_normals, axis=1)))
+
+    @cached_property
+    def bounds(self) -> np.ndarray:
+        """(2, 3) float64: lowest and highest corner of the bounding box of the referenced vertices."""
+        used = self.vertices[np.unique(self.faces)].astype(np.float64)
+        return np.stack([used.min(axis=0), used.max(axis=0)])
+
+    def transformed(self, matrix: np.ndarray) -> "Mesh":
+        """This mesh under a 4x4 affine ``matrix`` (computed in float64)."""
+        v = self.vertices.astype(np.float64) @ matrix[:3, :3].T + matrix[:3, 3]
+        faces = self.faces if np.linalg.det(matrix[:3, :3]) >= 0 else self.faces[:, ::-1]
+        return Mesh(v, faces)
+
+    @staticmethod
+    def concatenate(meshes: "list[Mesh]") -> "Mesh":
+        """One mesh holding all of ``meshes``; face ids follow the list order."""
+        if not meshes:
+            raise ValueError("meshes: nothing to concatenate")
+        offsets = np.cumsum([0] + [len(m.vertices) for m in meshes[:-1]])
+        vertices = np.concatenate([m.vertices for m in meshes])
+        faces = np.concatenate([m.faces.astype(np.int64) + o for m, o in zip(meshes, offsets)])
+        return Mesh(vertices, faces)
+
+
+def bounds_diagonal(bounds: np.ndarray) -> float:
+    return float(np.linalg.norm(bounds[1] - bounds[0]))

@@ -1,0 +1,1 @@
+"""Independent float64 NumPy implementations of every kernel: the oracles of the tests."""

@@ -1,0 +1,1 @@
+# OpenCL C sources of shadowcl, installed as the package data shadowcl/kernels.
