@@ -77,7 +77,7 @@ def list_devices() -> list[tuple[str, str, cl.Device]]:
     found = []
     for p_index, platform in enumerate(_platforms()):
         for d_index, device in enumerate(platform.get_devices()):
-            kind = cl.device_type.to_string(device.type)
+            kind = "/".join(name for name in ("CPU", "GPU", "ACCELERATOR") if device.type & getattr(cl.device_type, name)) or "other"
             found.append((f"{p_index}:{d_index}", f"{platform.name} / {device.name} [{kind}, {device.version}]", device))
     return found
 
@@ -108,10 +108,10 @@ class Device:
 
     ``Device()`` picks, in order: ``SHADOWCL_DEVICE`` or ``PYOPENCL_CTX`` (``"P:D"`` indices or a
     name substring), else the first CPU device, else any device. ``Device("pthread")`` or
-    ``Device(cl_device)`` picks explicitly.
+    ``Device(cl_device)`` picks explicitly. ``kernel_dir`` replaces the shipped kernels folder (tests).
     """
 
-    def __init__(self, device: "str | cl.Device | None" = None):
+    def __init__(self, device: "str | cl.Device | None" = None, kernel_dir: "Path | None" = None):
         if device is None:
             device = _default_device()
         elif isinstance(device, str):
@@ -119,6 +119,7 @@ class Device:
         elif not isinstance(device, cl.Device):
             raise TypeError(f"device: expected None, a selector string or a pyopencl.Device, got {type(device).__name__}")
         self.cl_device = device
+        self.kernel_dir = Path(kernel_dir) if kernel_dir is not None else KERNEL_DIR
         self.context = cl.Context([device])
         self.queue = cl.CommandQueue(self.context)
         self._programs: dict[tuple[str, tuple[str, ...]], cl.Program] = {}
@@ -158,10 +159,10 @@ class Device:
         return kernel
 
     def _build(self, filename: str, options: tuple[str, ...]) -> cl.Program:
-        path = KERNEL_DIR / filename
+        path = self.kernel_dir / filename
         if not path.is_file():
-            raise KernelBuildError(f"{filename}: no such kernel file in {KERNEL_DIR}")
-        source = expand_includes(path, KERNEL_DIR)
+            raise KernelBuildError(f"{filename}: no such kernel file in {self.kernel_dir}")
+        source = expand_includes(path, self.kernel_dir)
         try:
             return cl.Program(self.context, source).build(options=list(options) + ["-cl-std=CL1.2"])
         except cl.RuntimeError as error:

@@ -1,0 +1,110 @@
+"""The shadow methods behind one interface, and :func:`shadow_mask`, the one-shot call over them.
+
+A method is "prepare once, query many". Each is a class registered in :data:`METHODS`::
+
+    class SomeMethod:
+        name = "some"
+        parameters = {"resolution": (None, "grid cells per side; None picks one from the scene")}
+        def __init__(self, device: Device, **params): ...
+        def prepare(self, mesh: Mesh, light, receiver_bounds: np.ndarray, eps: float) -> None: ...
+        def classify(self, points: np.ndarray, normals: np.ndarray | None) -> np.ndarray: ...
+
+``prepare`` builds the light-space structure for occluders ``mesh`` seen from ``light``, for receivers
+inside ``receiver_bounds`` ((2, 3) float64 box); ``classify`` takes (N, 3) float64 points (and unit
+normals) inside those bounds and returns a bool (N,) mask, True = in shadow, with the meaning of
+``../shared/DESIGN.md``: the segment from the point (moved ``eps`` along its normal when normals are
+given) to the light hits a triangle further than ``eps`` from the point; a normal facing away from the
+light (``dot <= 0``) is in shadow.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+import numpy as np
+
+from .checks import finite_array
+from .device import get_device
+from .geometry import Mesh, bounds_diagonal
+from .lights import check_light
+
+# name -> "module:Class"; imported on first use so one method's dependencies never slow another.
+METHODS = {
+    "exact": "shadowcl.exact:ExactMethod",
+}
+
+EPS_FRACTION = 1e-4  # default eps as a fraction of the scene's bounding-box diagonal (DESIGN.md)
+
+
+def method_class(name: str):
+    if not isinstance(name, str):
+        raise TypeError(f"method: expected a method name, got {type(name).__name__}")
+    if name not in METHODS:
+        raise ValueError(f"method: unknown method {name!r}; available: {', '.join(sorted(METHODS))}")
+    module, attribute = METHODS[name].split(":")
+    return getattr(importlib.import_module(module), attribute)
+
+
+def methods() -> dict[str, dict[str, tuple]]:
+    """Every method's name and its parameters as ``{name: {parameter: (default, description)}}``."""
+    return {name: dict(method_class(name).parameters) for name in METHODS}
+
+
+def create_method(name: str, device=None, **params):
+    """An unprepared instance of method ``name`` on ``device``; unknown parameters raise ``TypeError``."""
+    cls = method_class(name)
+    unknown = sorted(set(params) - set(cls.parameters))
+    if unknown:
+        raise TypeError(f"{', '.join(unknown)}: not a parameter of method {name!r}; it takes {sorted(cls.parameters)}")
+    return cls(get_device(device), **params)
+
+
+def as_mesh(scene_or_mesh) -> Mesh:
+    """The occluding geometry of a :class:`Mesh` or a :class:`Scene`."""
+    if isinstance(scene_or_mesh, Mesh):
+        return scene_or_mesh
+    mesh = getattr(scene_or_mesh, "mesh", None)
+    if isinstance(mesh, Mesh):
+        return mesh
+    raise TypeError(f"scene_or_mesh: expected a Mesh or a Scene, got {type(scene_or_mesh).__name__}")
+
+
+def default_eps(bounds: np.ndarray) -> float:
+    return EPS_FRACTION * max(bounds_diagonal(bounds), np.finfo(np.float32).tiny)
+
+
+def check_points(points, normals) -> tuple[np.ndarray, np.ndarray | None]:
+    points = finite_array("points", points, (3,))
+    if normals is not None:
+        normals = finite_array("normals", normals, (3,))
+        if normals.shape != points.shape:
+            raise ValueError(f"normals: expected shape {points.shape} to match points, got {normals.shape}")
+        length = np.linalg.norm(normals, axis=1, keepdims=True)
+        if np.any(length == 0):
+            raise ValueError(f"normals: zero-length normal at index {int(np.argmin(length[:, 0]))}")
+        normals = normals / length
+    return points, normals
+
+
+def shadow_mask(scene_or_mesh, light, points, normals=None, method: str = "exact", device=None, eps=None, **params):
+    """Which of ``points`` are in shadow: bool (N,), True = in shadow.
+
+    ``scene_or_mesh`` holds the occluders, ``light`` is a :class:`PointLight` or
+    :class:`DirectionalLight`, ``points`` is (N, 3) and ``normals`` optionally (N, 3). ``eps`` is
+    absolute when given, else 1e-4 of the scene's bounding-box diagonal. ``method`` names one of
+    :func:`methods`; ``params`` are that method's parameters.
+    """
+    mesh = as_mesh(scene_or_mesh)
+    light = check_light(light)
+    points, normals = check_points(points, normals)
+    bounds = mesh.bounds
+    if eps is None:
+        eps = default_eps(bounds)
+    elif not (np.isfinite(eps) and eps >= 0):
+        raise ValueError(f"eps: must be a finite non-negative distance, got {eps!r}")
+    instance = create_method(method, device, **params)
+    if len(points) == 0:
+        return np.zeros(0, dtype=bool)
+    receiver_bounds = np.stack([points.min(axis=0), points.max(axis=0)])
+    instance.prepare(mesh, light, receiver_bounds, float(eps))
+    return instance.classify(points, normals)

@@ -1,0 +1,117 @@
+"""``render``: the camera's view of a scene, shadowed by any method, shaded ambient + Lambert.
+
+Pipeline: raster kernel (camera Z-buffer) → receivers (world position and normal per covered pixel)
+→ the method's mask per light → shading. A shadowed point gets ambient light only from that light.
+"""
+
+from __future__ import annotations
+
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import raster
+from .checks import positive_int
+from .device import get_device
+from .geometry import bounds_diagonal
+from .methods import create_method, default_eps
+
+AMBIENT = 0.18
+BACKGROUND_TOP = np.array([0.60, 0.70, 0.85])
+BACKGROUND_BOTTOM = np.array([0.92, 0.93, 0.95])
+DEFAULT_SIZE = (960, 540)
+MAX_SIDE = 16384
+
+
+@dataclass
+class RenderResult:
+    """An image and what went into it: per-light shadow masks of the covered pixels and stage times."""
+
+    image: np.ndarray  # (H, W, 3) uint8
+    covered: np.ndarray  # (H, W) bool: pixels that see the scene
+    shadow: np.ndarray  # (L, M) bool: per light, per covered pixel in row-major order
+    timings: dict[str, float] = field(default_factory=dict)  # seconds per stage
+
+
+@contextmanager
+def _timed(timings: dict[str, float], stage: str, progress):
+    """Add the time spent in the block to ``timings[stage]``; tell ``progress`` the stage started."""
+    if progress is not None:
+        progress(stage)
+    start = time.perf_counter()
+    try:
+        yield
+    finally:
+        timings[stage] = timings.get(stage, 0.0) + time.perf_counter() - start
+
+
+def render_size(scene, width, height) -> tuple[int, int]:
+    default = getattr(scene, "render_size", None) or DEFAULT_SIZE
+    width = default[0] if width is None else positive_int("width", width, maximum=MAX_SIDE)
+    height = default[1] if height is None else positive_int("height", height, maximum=MAX_SIDE)
+    return width, height
+
+
+def render_report(scene, method: str = "exact", width=None, height=None, device=None, eps=None, progress=None, **params) -> RenderResult:
+    """Render ``scene`` and return the image with masks and stage timings (see :func:`render`).
+
+    ``progress``, if given, is called with the name of each stage as it starts.
+    """
+    device = get_device(device)
+    width, height = render_size(scene, width, height)
+    timings: dict[str, float] = {}
+    mesh = scene.mesh
+    eps = default_eps(scene.bounds) if eps is None else eps
+    view = scene.camera.view(width, height, near=1e-3 * bounds_diagonal(scene.bounds))
+    def stage(name):
+        return _timed(timings, name, progress)
+
+    with stage("raster"):
+        zbuffer = raster.rasterize(device, mesh, view)
+    with stage("receivers"):
+        seen = raster.receivers(device, mesh, view, zbuffer)
+    shadow = np.zeros((len(scene.lights), len(seen.points)), dtype=bool)
+    for index, light in enumerate(scene.lights):
+        shadower = create_method(method, device, **params)
+        with stage("prepare"):
+            shadower.prepare(mesh, light, scene.bounds, eps)
+        with stage("classify"):
+            shadow[index] = shadower.classify(seen.points, seen.normals)
+    with stage("shading"):
+        image = _shade(scene, view, seen, shadow)
+    return RenderResult(image=image, covered=seen.mask, shadow=shadow, timings=timings)
+
+
+def render(scene, method: str = "exact", width=None, height=None, device=None, eps=None, **params) -> np.ndarray:
+    """The camera's view of ``scene`` as an (H, W, 3) uint8 image with shadows by ``method``.
+
+    ``width`` x ``height`` default to the scene's ``[render]`` size, else 960 x 540. Every light of
+    the scene contributes Lambert shading where the method says it is not shadowed; ambient light is
+    everywhere. ``eps`` and ``params`` go to the method (see :func:`shadowcl.methods`).
+    """
+    return render_report(scene, method, width, height, device, eps, **params).image
+
+
+def _shade(scene, view, seen, shadow: np.ndarray) -> np.ndarray:
+    colors = scene.triangle_colors[seen.triangle]
+    light_sum = np.zeros(len(seen.points))
+    for light, shadowed in zip(scene.lights, shadow):
+        to_light = light.direction_to_light(seen.points)
+        to_light /= np.linalg.norm(to_light, axis=1, keepdims=True)
+        lambert = np.clip(np.einsum("ij,ij->i", seen.normals, to_light), 0.0, None)
+        light_sum += np.where(shadowed, 0.0, lambert)
+    radiance = colors * (AMBIENT + (1.0 - AMBIENT) * np.clip(light_sum, 0.0, 1.0))[:, None]
+
+    rows = np.linspace(0.0, 1.0, view.height)[:, None, None]
+    image = np.broadcast_to(BACKGROUND_TOP * (1 - rows) + BACKGROUND_BOTTOM * rows, (view.height, view.width, 3)).copy()
+    image.reshape(-1, 3)[seen.pixel_index] = radiance
+    return to_srgb8(image)
+
+
+def to_srgb8(linear: np.ndarray) -> np.ndarray:
+    """Linear [0, 1] colours to 8-bit sRGB."""
+    c = np.clip(linear, 0.0, 1.0)
+    srgb = np.where(c <= 0.0031308, 12.92 * c, 1.055 * np.power(c, 1 / 2.4) - 0.055)
+    return np.round(srgb * 255).astype(np.uint8)

@@ -1,0 +1,1 @@
+# Scene files shipped with shadowcl, installed as the package data shadowcl/scenes.

@@ -1,0 +1,90 @@
+"""The device layer: selection, program builds and their caches, build errors."""
+
+import numpy as np
+import pyopencl as cl
+import pytest
+
+import shadowcl as sc
+from shadowcl import device as device_module
+
+VALUE_KERNEL = """
+#include "value.h"
+__kernel void write_value(__global int *out) { out[get_global_id(0)] = VALUE + HEADER_VALUE; }
+"""
+
+
+def run_value(dev: sc.Device, options=()) -> int:
+    out = dev.empty(4)
+    dev.kernel("value.cl", "write_value", options)(dev.queue, (1,), None, out)
+    return int(dev.from_device(out, 1, np.int32)[0])
+
+
+@pytest.fixture
+def kernel_dir(tmp_path):
+    (tmp_path / "value.cl").write_text(VALUE_KERNEL)
+    (tmp_path / "value.h").write_text("#define HEADER_VALUE 100\n")
+    return tmp_path
+
+
+def test_default_device_prefers_cpu(device):
+    assert device.cl_device.type & cl.device_type.CPU or not any(
+        d.type & cl.device_type.CPU for _, _, d in sc.list_devices()
+    )
+
+
+def test_select_by_index_name_and_environment(monkeypatch):
+    selector, description, cl_device = sc.list_devices()[0]
+    assert sc.Device(selector).cl_device == cl_device
+    assert sc.Device(cl_device.name[:6].upper()).cl_device == cl_device
+    monkeypatch.setenv("SHADOWCL_DEVICE", selector)
+    assert sc.Device().cl_device == cl_device
+
+
+def test_bad_selectors():
+    with pytest.raises(ValueError, match="device: no OpenCL device matches 'no-such-device'"):
+        sc.Device("no-such-device")
+    with pytest.raises(TypeError, match="device: expected"):
+        sc.Device(3)
+
+
+def test_no_platform_says_how_to_get_pocl(monkeypatch):
+    monkeypatch.setattr(device_module.cl, "get_platforms", lambda: [])
+    monkeypatch.delenv("SHADOWCL_DEVICE", raising=False)
+    monkeypatch.delenv("PYOPENCL_CTX", raising=False)
+    with pytest.raises(RuntimeError, match="pocl-binary-distribution"):
+        sc.Device()
+
+
+def test_kernel_objects_are_reused(kernel_dir):
+    dev = sc.Device(kernel_dir=kernel_dir)
+    first = dev.kernel("value.cl", "write_value", ("-DVALUE=1",))
+    assert dev.kernel("value.cl", "write_value", ("-DVALUE=1",)) is first
+    assert dev.kernel("value.cl", "write_value", ("-DVALUE=2",)) is not first
+
+
+def test_build_options_and_header_edits_are_never_served_stale(kernel_dir):
+    # PoCL and PyOpenCL keep binary caches across processes; a changed -D option or header must rebuild.
+    assert run_value(sc.Device(kernel_dir=kernel_dir), ("-DVALUE=1",)) == 101
+    assert run_value(sc.Device(kernel_dir=kernel_dir), ("-DVALUE=2",)) == 102
+    (kernel_dir / "value.h").write_text("#define HEADER_VALUE 200\n")
+    assert run_value(sc.Device(kernel_dir=kernel_dir), ("-DVALUE=1",)) == 201
+
+
+def test_build_error_names_file_and_carries_log(kernel_dir):
+    (kernel_dir / "broken.cl").write_text("__kernel void broken(__global int *out) { out[0] = undefined_name; }\n")
+    with pytest.raises(sc.KernelBuildError, match=r"broken\.cl(.|\n)*undefined_name"):
+        sc.Device(kernel_dir=kernel_dir).program("broken.cl")
+
+
+def test_missing_kernel_file_and_header(kernel_dir):
+    dev = sc.Device(kernel_dir=kernel_dir)
+    with pytest.raises(sc.KernelBuildError, match="nothing.cl: no such kernel file"):
+        dev.program("nothing.cl")
+    (kernel_dir / "needs.cl").write_text('#include "absent.h"\n')
+    with pytest.raises(sc.KernelBuildError, match="cannot find included header 'absent.h'"):
+        dev.program("needs.cl")
+
+
+def test_buffer_larger_than_the_device_allows(device):
+    with pytest.raises(ValueError, match="depth map: needs .* MiB in one buffer"):
+        device.empty(device.max_alloc_bytes + 1, "depth map")
