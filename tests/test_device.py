@@ -88,3 +88,9 @@ def test_missing_kernel_file_and_header(kernel_dir):
 def test_buffer_larger_than_the_device_allows(device):
     with pytest.raises(ValueError, match="depth map: needs .* MiB in one buffer"):
         device.empty(device.max_alloc_bytes + 1, "depth map")
+
+
+def test_include_with_trailing_comment(kernel_dir):
+    source = VALUE_KERNEL.replace('#include "value.h"', '#include "value.h"  // HEADER_VALUE')
+    (kernel_dir / "value.cl").write_text(source)
+    assert run_value(sc.Device(kernel_dir=kernel_dir), ("-DVALUE=3",)) == 103

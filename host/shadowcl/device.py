@@ -32,7 +32,8 @@ NO_PLATFORM_MESSAGE = (
     "missing), or install your GPU vendor's OpenCL driver (ICD), then check with 'shadowcl devices'."
 )
 
-_INCLUDE = re.compile(r'^[ \t]*#[ \t]*include[ \t]*"([^"]+)"[ \t]*$', re.MULTILINE)
+# An include line, optionally followed by a // or /* */ comment.
+_INCLUDE = re.compile(r'^[ \t]*#[ \t]*include[ \t]*"([^"]+)"[ \t]*(?://.*|/\*.*\*/[ \t]*)?$', re.MULTILINE)
 
 
 class KernelBuildError(RuntimeError):
