@@ -1,0 +1,464 @@
+"""Light-space lists: occluding primitives binned by their projection onto the light's view(s).
+
+This is an irregular Z-buffer's bookkeeping (Lai & Cheng, section 4.2, on the original primitives):
+project every occluder onto a grid of cells in the light's view, keep a list per cell of the primitives
+whose projection touches it, and test each receiver only against its own cell's list. It is generic
+over primitives: it takes (P, K, 3) corners (K = 3 triangles; K = 4 planar convex quads) and knows
+nothing about the test a method runs on the lists.
+
+**Why one cell is enough.** Every point of a receiver's segment to a point light (its ray towards a
+directional light) projects to the same point of the light's view as the receiver itself, so a
+primitive that blocks the segment covers the receiver's projection, hence its cell.
+
+**Views** (:func:`fit_views`), fitted to the receivers' bounds:
+
+- directional light: one orthographic view along the light's direction, its window the bounding
+  rectangle of the 8 projected corners of the receiver box;
+- point light outside the receiver box, with every box corner in front of it within a cone of
+  ``max_fov`` degrees: one perspective view (``u = d.right / d.forward``, ``v = d.up / d.forward``,
+  ``d = p - light``) looking at the box centre, its window the projected corners' bounding rectangle;
+- otherwise a cube of six perspective faces, faces ordered +x, -x, +y, -y, +z, -z; a point goes to the
+  face of the dominant axis of ``d``.
+
+Then (:func:`fit_to_footprint`, on the device) each window is cut to the bounding box of the *small*
+primitives projecting into it, so the cells go where the occluders are dense: a bunny on a large
+ground quad gets its cells over the bunny, not over the ground (measured on the bench's bunny scene:
+lists of up to 460 triangles with the receivers' window, 69 with the fitted one). The cells are split
+between views in proportion to their small primitives.
+
+**Cells, levels and the border.** Each view has ``nx`` x ``ny`` fine cells and a coarse grid of
+:data:`COARSE` x :data:`COARSE` fine cells per cell. A primitive whose candidate cells span more than
+COARSE fine cells on an axis (a ground quad, a wall) is listed in the coarse grid only: a few entries
+instead of thousands (the bench's ground quad: ~300 instead of ~600 k). A receiver walks its fine and
+its coarse cell's lists. The outermost rows and columns of cells extend to the edge of the view's
+*domain* (the whole plane for a single view, the face's square for a cube face): a primitive
+projecting beyond the window is listed in the border cells it reaches, and a point projecting outside
+the window (outside the prepared receiver bounds) falls into the nearest border cell, so
+classification stays correct for any point the view covers. (A point *behind* a single perspective
+view has no cell: the kernels report ``W <= 0`` and the method must handle it.)
+
+**Conservative lists.** Primitives are clipped to the half-space in front of each perspective view
+(``W >= 0``; parts behind a point light cannot block a receiver in front of it, whose segment lies in
+front), projected, and listed in every cell whose rectangle enlarged by :data:`DELTA` cells (plus a
+relative float32 rounding allowance per edge) the projected polygon touches: candidate cells from the
+polygon's bounding box, then the separating-axis test on the polygon's edges. Clipping can make
+vertices on the light's plane: they are points at infinity, kept as directions.
+
+**Lists on the device.** ``lists="csr"`` (the default): count (atomic increments per cell; each
+primitive also records its cells as a 64-bit mask over its candidate cells), exclusive prefix sum
+(three launches of serial blocks, no local memory), fill (atomic decrements give each entry its slot;
+the mask spares re-projecting). The order within a cell is whatever the atomics give: the exact test
+does not depend on it (sorting by distance would only shorten walks of lit receivers, which the exact
+method's plane cull already makes cheap). ``lists="linked"``: one pass, nodes taken from an atomic
+counter with a fixed capacity and pushed on per-cell heads with ``atomic_xchg``; a build that runs out
+keeps counting but writes nothing, and the host grows the buffer to the counted size and reruns.
+Measured on the bench's bunny scene: linked builds in one pass but its walk chases pointers through
+interleaved nodes; CSR's classify is faster by more than linked saves in the build (see
+host/shadowcl/exact.py).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import pyopencl as cl
+
+from .checks import positive_int
+from .lights import DirectionalLight, PointLight
+
+DELTA = 1.0 / 64.0          # cell enlargement in cells (kernels/lightspace.cl: LS_DELTA)
+VIEW_FLOATS = 32            # floats per view record (kernels/lightspace.h)
+COARSE = 16                 # fine cells per coarse cell side (kernels/lightspace.h: LS_COARSE)
+BIG = 1.0e30                # "infinite" domain side (kernels/vecmath.h: SC_BIG)
+MAX_SIDE = 1 << 15          # cells per side of one view
+MAX_CELLS = 1 << 24         # cells picked automatically at most
+MIN_VIEW_CELLS = 16         # cells of a view with no small primitive
+SMALL_FRACTION = 1.0 / 16   # a primitive projecting wider than this share of the window is "large"
+CELLS_PER_PRIM = 2          # cells per primitive (measured: pick_cell_count)
+RECEIVERS_PER_CELL = 16     # receivers per cell (measured: pick_cell_count)
+MAX_FOV_DEGREES = 120.0     # widest single perspective view before the cube is used
+SCAN_BLOCKS = 512           # work-items of the prefix sum
+CUBE_FACES = ((0, 1.0), (0, -1.0), (1, 1.0), (1, -1.0), (2, 1.0), (2, -1.0))   # (axis, sign) +x -x +y -y +z -z
+
+
+def orthonormal_basis(forward: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit ``right`` and ``up`` completing unit ``forward`` to an orthonormal frame (float64)."""
+    helper = np.eye(3)[int(np.argmin(np.abs(forward)))]
+    right = np.cross(helper, forward)
+    right /= np.linalg.norm(right)
+    return right, np.cross(forward, right)
+
+
+def box_corners(bounds: np.ndarray) -> np.ndarray:
+    lo, hi = bounds
+    return np.array([[(lo, hi)[i >> k & 1][k] for k in range(3)] for i in range(8)], dtype=np.float64)
+
+
+def _padded(low: float, high: float, minimum: float) -> tuple[float, float]:
+    """[low, high] widened by 1e-3 of its extent (at least ``minimum`` wide) so boundary points are inside."""
+    centre, half = 0.5 * (low + high), 0.5 * (high - low)
+    half = max(half * (1 + 1e-3), 0.5 * minimum)
+    return centre - half, centre + half
+
+
+@dataclass(frozen=True)
+class LightViews:
+    """The light's view(s), in the scene's local frame (positions relative to ``origin``).
+
+    ``axes[v]`` holds the rows right, up, forward of view ``v``; ``windows[v]`` the (u0, u1, v0, v1) its
+    grid covers and ``domains[v]`` the part of the plane it answers for (infinite for a single view, the
+    face's square [-1, 1]^2 for a cube face), both in projected units (tangents for perspective views,
+    scene units for orthographic ones); ``eye`` is the light's position for perspective views, else
+    zero. ``weights[v]`` is the number of small primitives whose projection fitted the window (it splits
+    the cells between views).
+    """
+
+    kind: str                # "orthographic" | "perspective" | "cube"
+    eye: np.ndarray          # (3,) float64
+    axes: np.ndarray         # (V, 3, 3) float64
+    windows: np.ndarray      # (V, 4) float64
+    domains: np.ndarray      # (V, 4) float64, may be infinite
+    weights: np.ndarray      # (V,) float64
+
+    @property
+    def nviews(self) -> int:
+        return len(self.axes)
+
+    @property
+    def perspective(self) -> bool:
+        return self.kind != "orthographic"
+
+
+def fit_views(light, receiver_bounds: np.ndarray, origin: np.ndarray, scale: float,
+              max_fov: float = MAX_FOV_DEGREES) -> LightViews:
+    """The light's view(s) for receivers in ``receiver_bounds`` ((2, 3) world box), in the frame at ``origin``.
+
+    Each window covers the receivers (the projected corners of their box); :func:`fit_to_footprint`
+    then cuts it to where the occluders are. ``scale`` (the scene's size) sets the smallest window when
+    the receivers are a single point.
+    """
+    bounds = np.asarray(receiver_bounds, dtype=np.float64) - origin
+    corners = box_corners(bounds)
+    scale = max(float(scale), float(np.linalg.norm(bounds[1] - bounds[0])), 1e-30)
+    infinite = np.array([[-np.inf, np.inf, -np.inf, np.inf]])
+    if isinstance(light, DirectionalLight):
+        forward = np.asarray(light.direction, dtype=np.float64)
+        right, up = orthonormal_basis(forward)
+        u, v = corners @ right, corners @ up
+        window = (*_padded(u.min(), u.max(), 1e-6 * scale), *_padded(v.min(), v.max(), 1e-6 * scale))
+        return LightViews("orthographic", np.zeros(3), np.stack([right, up, forward])[None], np.array([window]),
+                          infinite, np.ones(1))
+    if not isinstance(light, PointLight):
+        raise TypeError(f"light: expected a PointLight or DirectionalLight, got {type(light).__name__}")
+    eye = np.asarray(light.position, dtype=np.float64) - origin
+    margin = 1e-6 * scale
+    inside = bool(np.all(eye >= bounds[0] - margin) and np.all(eye <= bounds[1] + margin))
+    if not inside:
+        forward = 0.5 * (bounds[0] + bounds[1]) - eye
+        forward /= np.linalg.norm(forward)
+        right, up = orthonormal_basis(forward)
+        d = corners - eye
+        w = d @ forward
+        if np.all(w > 1e-6 * np.linalg.norm(d, axis=1)):
+            u, v = (d @ right) / w, (d @ up) / w
+            if np.max(np.hypot(u, v)) <= math.tan(math.radians(max_fov / 2)):
+                window = (*_padded(u.min(), u.max(), 1e-6), *_padded(v.min(), v.max(), 1e-6))
+                return LightViews("perspective", eye, np.stack([right, up, forward])[None], np.array([window]),
+                                  infinite, np.ones(1))
+    axes = []
+    for axis, sign in CUBE_FACES:
+        forward = sign * np.eye(3)[axis]
+        axes.append(np.stack([np.eye(3)[(axis + 1) % 3], np.eye(3)[(axis + 2) % 3], forward]))
+    square = np.tile([-1.0, 1.0, -1.0, 1.0], (6, 1))
+    return LightViews("cube", eye, np.array(axes), square, square.copy(), np.ones(6))
+
+
+def fit_to_footprint(device, views: LightViews, prims, nprims: int, corners: int = 3,
+                     small: float = SMALL_FRACTION) -> LightViews:
+    """``views`` with each window cut to the footprint of its *small* primitives (on the device).
+
+    ``prims`` is the device buffer of (P, K, 3) float32 corners. A primitive is small when its
+    projection is at most ``small`` of the window wide and high: cells then go where occluders are
+    dense. Large primitives (a ground plane, walls) need no cells of their own: outside the window they
+    are listed in the border cells, which extend to the view's domain. A view without small primitives
+    keeps its window with weight 0 (it gets the fewest cells).
+    """
+    if nprims == 0:
+        return views
+    probe = make_grid(views, resolution=1)                  # 1 x 1 cell per view: window-relative units
+    chunk = max(256, -(-nprims // 256))
+    groups = -(-nprims // chunk)
+    out = device.empty(4 * 5 * views.nviews * groups, "footprint partials")
+    kernel = device.kernel("lightspace.cl", "ls_footprint", (f"-DCORNERS={corners}",) + probe.options)
+    kernel(device.queue, (groups,), None, prims, np.int32(nprims), device.to_device(probe.params),
+           np.float32(small), np.int32(chunk), out)
+    part = device.from_device(out, (groups, views.nviews, 5), np.float32).astype(np.float64)
+    windows, weights = views.windows.copy(), np.zeros(views.nviews)
+    for k in range(views.nviews):
+        count = part[:, k, 4].sum()
+        if count == 0:
+            continue
+        x0, x1 = max(part[:, k, 0].min(), 0.0), min(part[:, k, 1].max(), 1.0)
+        y0, y1 = max(part[:, k, 2].min(), 0.0), min(part[:, k, 3].max(), 1.0)
+        u0, u1, v0, v1 = views.windows[k]
+        minimum = 1e-6 * max(u1 - u0, v1 - v0)
+        windows[k] = (*_padded(u0 + x0 * (u1 - u0), u0 + x1 * (u1 - u0), minimum),
+                      *_padded(v0 + y0 * (v1 - v0), v0 + y1 * (v1 - v0), minimum))
+        weights[k] = count
+    return LightViews(views.kind, views.eye, views.axes, windows, views.domains, weights)
+
+
+def pick_cell_count(nprims: int, nreceivers: int | None) -> int:
+    """Total cells for ``nprims`` occluders and about ``nreceivers`` receivers.
+
+    The rule takes the larger of ``CELLS_PER_PRIM * P`` and ``N / RECEIVERS_PER_CELL``, clamped.
+    Measured on the bunny on a ground quad (69 k triangles, 1.2 M receivers, point and directional
+    light), prepare + classify in ms for 0.5, 1, 2 and 4 cells per triangle: 66, 71, 62, 66 (point)
+    and 56, 53, 58, 78 (directional): flat between 1 and 2, the build growing beyond (entries grow
+    with cells while lists stop shrinking below ~5 triangles, the depth of the model). The receiver
+    term only matters for many more receivers than triangles.
+    """
+    wanted = CELLS_PER_PRIM * nprims
+    if nreceivers:
+        wanted = max(wanted, nreceivers // RECEIVERS_PER_CELL)
+    return int(min(max(wanted, 64 * 64), MAX_CELLS))
+
+
+@dataclass(frozen=True)
+class Grid:
+    """Views and their cells: view ``v`` has ``nx[v]`` x ``ny[v]`` fine cells numbered from ``base0[v]``
+    and ``nx1[v]`` x ``ny1[v]`` coarse cells (COARSE x COARSE fine cells each) numbered from ``base1[v]``;
+    fine cells of all views come first. ``params`` is the (V, VIEW_FLOATS) float32 view table of the
+    kernels (kernels/lightspace.h).
+    """
+
+    views: LightViews
+    nx: np.ndarray
+    ny: np.ndarray
+    base0: np.ndarray
+    nx1: np.ndarray
+    ny1: np.ndarray
+    base1: np.ndarray
+    params: np.ndarray = field(repr=False)
+
+    @property
+    def fine_cells(self) -> int:
+        return int(np.sum(self.nx * self.ny))
+
+    @property
+    def cells(self) -> int:
+        """Fine and coarse cells of every view."""
+        return int(self.fine_cells + np.sum(self.nx1 * self.ny1))
+
+    @property
+    def options(self) -> tuple[str, ...]:
+        """Build options shared by every kernel that reads this grid."""
+        v = self.views
+        return (f"-DNVIEWS={v.nviews}", f"-DPERSPECTIVE={int(v.perspective)}")
+
+
+def _sides(cells: int, aspect: float) -> tuple[int, int]:
+    nx = int(np.clip(round(math.sqrt(cells * aspect)), 1, MAX_SIDE))
+    return nx, int(np.clip(round(cells / nx), 1, MAX_SIDE))
+
+
+def make_grid(views: LightViews, cells: int | None = None, resolution: int | None = None) -> Grid:
+    """A grid over ``views``: about ``cells`` cells in all, or ``resolution`` cells on each window's longer side.
+
+    Cells are shared between views in proportion to their weights (at least MIN_VIEW_CELLS each); each
+    window's aspect decides its ``nx`` / ``ny`` so cells are square-ish.
+    """
+    V = views.nviews
+    aspects = (views.windows[:, 1] - views.windows[:, 0]) / (views.windows[:, 3] - views.windows[:, 2])
+    if resolution is not None:
+        resolution = positive_int("resolution", resolution, 1, MAX_SIDE)
+        sides = [(resolution, max(1, round(resolution / a))) if a >= 1 else (max(1, round(resolution * a)), resolution)
+                 for a in aspects]
+    else:
+        total = positive_int("cells", int(cells), 1)
+        weights = views.weights if views.weights.sum() > 0 else np.ones(V)
+        share = weights / weights.sum()
+        sides = [_sides(max(MIN_VIEW_CELLS, int(total * share[k])), aspects[k]) for k in range(V)]
+    nx = np.array([s[0] for s in sides], dtype=np.int64)
+    ny = np.array([s[1] for s in sides], dtype=np.int64)
+    nx1, ny1 = (nx - 1) // COARSE + 1, (ny - 1) // COARSE + 1
+    base0 = np.concatenate([[0], np.cumsum(nx * ny)[:-1]])
+    base1 = int(np.sum(nx * ny)) + np.concatenate([[0], np.cumsum(nx1 * ny1)[:-1]])
+    total = int(np.sum(nx * ny) + np.sum(nx1 * ny1))
+    if total >= 2**31 - 1:
+        raise ValueError(f"resolution: {total} cells do not fit 32-bit indices; lower it")
+    params = np.zeros((V, VIEW_FLOATS), dtype=np.float32)
+    ints = params.view(np.int32)
+    for k in range(V):
+        right, up, forward = views.axes[k]
+        u0, u1, v0, v1 = views.windows[k]
+        sx, sy = nx[k] / (u1 - u0), ny[k] / (v1 - v0)
+        if views.perspective:
+            rows = [views.eye, 0.0, sx * (right - u0 * forward), 0.0, sy * (up - v0 * forward), 0.0, forward, 0.0]
+        else:
+            rows = [np.zeros(3), 0.0, sx * right, -sx * u0, sy * up, -sy * v0, np.zeros(3), 1.0]
+        params[k, :16] = np.concatenate([np.atleast_1d(np.asarray(r, dtype=np.float64)) for r in rows])
+        ints[k, 16:20] = nx[k], ny[k], base0[k], base1[k]
+        ints[k, 24:26] = nx1[k], ny1[k]
+        du0, du1, dv0, dv1 = views.domains[k]
+        domain = np.array([(du0 - u0) * sx, (du1 - u0) * sx, (dv0 - v0) * sy, (dv1 - v0) * sy])
+        params[k, 20:24] = np.clip(np.nan_to_num(domain, posinf=BIG, neginf=-BIG), -BIG, BIG)
+    return Grid(views, nx, ny, base0, nx1, ny1, base1, params)
+
+
+@dataclass
+class Lists:
+    """Per-cell primitive lists on the device, and what building them cost.
+
+    CSR: ``offsets`` (cells + 1 ints) and ``items`` (entries ints). Linked: ``heads`` (cells ints, -1 =
+    empty) and ``nodes`` (2 ints per node: primitive, next). ``stats`` holds counts and stage times (s).
+    """
+
+    kind: str
+    grid: Grid
+    nprims: int
+    entries: int
+    offsets: cl.Buffer | None = None
+    items: cl.Buffer | None = None
+    heads: cl.Buffer | None = None
+    nodes: cl.Buffer | None = None
+    capacity: int = 0
+    coarse_entries: int = -1          # entries in coarse cells (-1: unknown, linked lists)
+    params: cl.Buffer | None = None
+    stats: dict = field(default_factory=dict)
+
+    def buffers(self) -> tuple[cl.Buffer, cl.Buffer]:
+        """The two list buffers the kernels take: (offsets, items) or (heads, nodes)."""
+        return (self.offsets, self.items) if self.kind == "csr" else (self.heads, self.nodes)
+
+    def to_host(self, device) -> tuple[np.ndarray, np.ndarray]:
+        """The lists as CSR (offsets (cells + 1,), items (entries,)); cells of linked lists in node order."""
+        cells = self.grid.cells
+        if self.kind == "csr":
+            offsets = device.from_device(self.offsets, cells + 1, np.int32)
+            return offsets.astype(np.int64), device.from_device(self.items, self.entries, np.int32)
+        heads = device.from_device(self.heads, cells, np.int32)
+        nodes = device.from_device(self.nodes, (max(self.capacity, 1), 2), np.int32)
+        per_cell = []
+        for head in heads:
+            found, node = [], int(head)
+            while node >= 0:
+                found.append(nodes[node, 0])
+                node = int(nodes[node, 1])
+            per_cell.append(found)
+        lengths = np.array([len(c) for c in per_cell], dtype=np.int64)
+        offsets = np.concatenate([[0], np.cumsum(lengths)])
+        items = np.array([p for c in per_cell for p in c], dtype=np.int32)
+        return offsets, items
+
+
+class ListBuilder:
+    """Builds :class:`Lists` for one grid and primitive buffer; keeps its scratch buffers between builds."""
+
+    def __init__(self, device, corners: int = 3):
+        if corners not in (3, 4):
+            raise ValueError(f"corners: primitives have 3 or 4 corners, got {corners}")
+        self.device = device
+        self.corners = corners
+        self._counts = None       # (cells,) int, all zero between builds
+        self._counts_cells = 0
+
+    def _kernel(self, grid: Grid, name: str):
+        return self.device.kernel("lightspace.cl", name, (f"-DCORNERS={self.corners}",) + grid.options)
+
+    def build(self, grid: Grid, prims: cl.Buffer, nprims: int, kind: str = "csr",
+              initial_capacity: int | None = None) -> Lists:
+        """Lists of the ``nprims`` primitives in ``prims`` ((P, K, 3) float32 on the device) over ``grid``."""
+        if kind not in ("csr", "linked"):
+            raise ValueError(f"lists: expected 'csr' or 'linked', got {kind!r}")
+        dev, queue = self.device, self.device.queue
+        cells = grid.cells
+        params = dev.to_device(grid.params)
+        lists = Lists(kind, grid, nprims, 0)
+        lists.stats.update(cells=cells, nx=grid.nx.tolist(), ny=grid.ny.tolist(), views=grid.views.nviews,
+                           view_kind=grid.views.kind)
+        gsize = (max(nprims, 1),)
+        if kind == "csr":
+            t0 = time.perf_counter()
+            if self._counts is None or self._counts_cells != cells:
+                self._counts = dev.empty(4 * cells, "light-space cell counts")
+                self._counts_cells = cells
+                cl.enqueue_fill_buffer(queue, self._counts, np.int32(0), 0, 4 * cells)
+            records = dev.empty(16 * max(nprims, 1), "light-space count records")
+            self._kernel(grid, "ls_count")(queue, gsize, None, prims, np.int32(nprims), params, self._counts, records)
+            queue.finish()
+            t1 = time.perf_counter()
+            offsets = dev.empty(4 * (cells + 1), "light-space offsets")
+            total = self._scan(grid, self._counts, cells, offsets)
+            t2 = time.perf_counter()
+            limit = min(dev.max_alloc_bytes // 4, 2**31 - 1)
+            if total > limit:
+                self._counts = None          # the fill never ran: counts are not zero any more
+                raise ValueError(f"resolution: the lists need {total} entries, more than {dev.name} holds in one "
+                                 f"buffer ({limit}); lower the resolution")
+            items = dev.empty(4 * max(total, 1), "light-space lists")
+            self._kernel(grid, "ls_fill_csr")(queue, gsize, None, prims, np.int32(nprims), params,
+                                              self._counts, offsets, items, records)
+            queue.finish()
+            t3 = time.perf_counter()
+            lists.offsets, lists.items, lists.entries, lists.capacity = offsets, items, total, total
+            fine = np.empty(1, np.int32)
+            cl.enqueue_copy(queue, fine, offsets, src_offset=4 * grid.fine_cells)
+            lists.coarse_entries = total - int(fine[0])
+            lists.stats.update(project_count_s=t1 - t0, scan_s=t2 - t1, fill_s=t3 - t2, rebuilds=0)
+        else:
+            capacity = int(initial_capacity) if initial_capacity is not None else max(1024, 8 * nprims)
+            heads = dev.empty(4 * cells, "light-space list heads")
+            counter = dev.empty(4, "light-space node counter")
+            rebuilds = 0
+            t0 = time.perf_counter()
+            while True:
+                nodes = dev.empty(8 * max(capacity, 1), "light-space list nodes")
+                cl.enqueue_fill_buffer(queue, heads, np.int32(-1), 0, 4 * cells)
+                cl.enqueue_fill_buffer(queue, counter, np.int32(0), 0, 4)
+                self._kernel(grid, "ls_fill_linked")(queue, gsize, None, prims, np.int32(nprims), params,
+                                                     heads, nodes, np.int32(capacity), counter)
+                used = int(dev.from_device(counter, 1, np.int32)[0])
+                if used < 0:
+                    raise ValueError("resolution: the linked lists overflowed a 32-bit node counter; lower it")
+                if used <= capacity:
+                    break
+                capacity = used          # the counter kept counting: exactly what a rerun needs
+                rebuilds += 1
+            t1 = time.perf_counter()
+            lists.heads, lists.nodes, lists.entries, lists.capacity = heads, nodes, used, capacity
+            lists.stats.update(project_count_s=0.0, scan_s=0.0, fill_s=t1 - t0, rebuilds=rebuilds)
+        lists.stats.update(entries=lists.entries, coarse_entries=lists.coarse_entries, build_s=sum(lists.stats[k] for k in ("project_count_s", "scan_s", "fill_s")))
+        lists.params = params
+        return lists
+
+    def _scan(self, grid: Grid, counts: cl.Buffer, n: int, offsets: cl.Buffer) -> int:
+        """offsets = exclusive prefix sum of counts (n + 1 entries); returns the total."""
+        dev, queue = self.device, self.device.queue
+        block = max(1024, -(-n // SCAN_BLOCKS))
+        nblocks = -(-n // block)
+        sums = dev.empty(8 * (nblocks + 1), "scan block sums")
+        args = (counts, np.int32(n), np.int32(block))
+        self._kernel(grid, "scan_block_sums")(queue, (nblocks,), None, *args, sums)
+        self._kernel(grid, "scan_sums")(queue, (1,), None, sums, np.int32(nblocks))
+        self._kernel(grid, "scan_blocks")(queue, (nblocks,), None, *args, sums, offsets, np.int32(nblocks))
+        total = np.empty(1, np.int64)
+        cl.enqueue_copy(queue, total, sums, src_offset=8 * nblocks)
+        return int(total[0])
+
+
+def point_cells(device, grid: Grid, points_rel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Fine cell, coarse cell and W of each point ((N, 3), relative to the grid's origin), as the kernels
+    compute them (W <= 0: behind a single perspective view, no cell)."""
+    points32 = np.ascontiguousarray(points_rel, dtype=np.float32)
+    n = len(points32)
+    fine, coarse, w = device.empty(4 * n, "cells"), device.empty(4 * n, "cells"), device.empty(4 * n, "w")
+    kernel = device.kernel("lightspace.cl", "ls_points", ("-DCORNERS=3",) + grid.options)
+    if n:
+        kernel(device.queue, (n,), None, device.to_device(points32), np.int32(n), device.to_device(grid.params),
+               fine, coarse, w)
+    return (device.from_device(fine, n, np.int32), device.from_device(coarse, n, np.int32),
+            device.from_device(w, n, np.float32))

@@ -1,0 +1,253 @@
+"""Light-space lists (kernels/lightspace.cl) against the float64 reference (reference/lightspace.py).
+
+What is checked, per view and level:
+
+- conservative: every cell the reference finds touched by the exact projection (delta = 0) lists the
+  primitive on the device;
+- tight: the device lists a primitive only in cells the reference finds within 0.25 cell of its
+  projection. The device enlarges cells by DELTA = 1/64 cell plus a relative float32 allowance
+  (~1e-5 of the coordinates, more for very short edges); the test geometry keeps edges longer than a
+  cell's tenth, where that allowance stays far below 0.25 cell;
+- an independent invariant: points sampled on each primitive's front part fall in a cell listing it.
+"""
+
+import numpy as np
+import pytest
+
+import shadowcl as sc
+from shadowcl import lightspace as ls
+from shadowcl.reference import lightspace as ref
+
+UPPER_DELTA = 0.25  # cells: see the module docstring
+
+
+def soup(rng, n, size, spread=1.0):
+    centres = rng.uniform(-spread, spread, (n, 1, 3))
+    return centres + rng.normal(0.0, size, (n, 3, 3))
+
+
+def build(device, light, corners, receiver_bounds, cells=None, resolution=None, kind="csr", capacity=None):
+    corners32 = np.ascontiguousarray(corners, dtype=np.float32)
+    k = corners32.shape[1]
+    prims = device.to_device(corners32)
+    views = ls.fit_views(light, receiver_bounds, np.zeros(3), 3.0)
+    views = ls.fit_to_footprint(device, views, prims, len(corners32), corners=k)
+    grid = ls.make_grid(views, cells=cells, resolution=resolution)
+    lists = ls.ListBuilder(device, corners=k).build(grid, prims, len(corners32), kind, capacity)
+    return corners32, grid, lists
+
+
+def dense(device, grid, lists, nprims):
+    offsets, items = lists.to_host(device)
+    listed = np.zeros((grid.cells, nprims), dtype=bool)
+    cell = np.repeat(np.arange(grid.cells), np.diff(offsets))
+    listed[cell, items] = True
+    assert listed.sum() == len(items), f"{lists.kind}: a primitive is listed twice in one cell"
+    return listed
+
+
+def compare_with_reference(device, grid, lists, corners32):
+    """(entries, missing, extra) summed over views and levels; missing and extra must be 0."""
+    listed = dense(device, grid, lists, len(corners32))
+    v = grid.views
+    args = (corners32, v.kind, v.eye, v.axes, v.windows, v.domains, grid.nx, grid.ny)
+    refs = {(level, d): ref.cell_lists(*args, d, level=level, coarse=ls.COARSE)
+            for level in (0, 1) for d in (0.0, UPPER_DELTA)}
+    fine_base = np.concatenate([[0], np.cumsum(grid.nx * grid.ny)])
+    coarse_base = np.concatenate([[0], np.cumsum(grid.nx1 * grid.ny1)])
+    fine, coarse = listed[:grid.fine_cells], listed[grid.fine_cells:]
+    entries = missing = extra = 0
+    for view in range(v.nviews):
+        f = fine[fine_base[view]:fine_base[view + 1]]
+        c = coarse[coarse_base[view]:coarse_base[view + 1]]
+        at_coarse = c.any(axis=0)   # a primitive's level is per view
+        for level, block, rows in ((0, f, slice(fine_base[view], fine_base[view + 1])),
+                                   (1, c, slice(coarse_base[view], coarse_base[view + 1]))):
+            keep = at_coarse if level else ~at_coarse
+            lower = refs[(level, 0.0)][rows][:, keep]
+            upper = refs[(level, UPPER_DELTA)][rows][:, keep]
+            got = block[:, keep]
+            entries += int(got.sum())
+            missing += int((lower & ~got).sum())
+            extra += int((got & ~upper).sum())
+    return entries, missing, extra
+
+
+LIGHTS = {
+    "directional": (sc.DirectionalLight((0.3, -1.0, 0.2)), "orthographic"),
+    "point-above": (sc.PointLight((0.2, 4.0, 0.1)), "perspective"),
+    "point-inside": (sc.PointLight((0.1, 0.2, -0.3)), "cube"),
+}
+BOUNDS = np.array([[-1.5, -1.5, -1.5], [1.5, 0.5, 1.5]])
+
+
+@pytest.mark.parametrize("kind", ["csr", "linked"])
+@pytest.mark.parametrize("light_name", list(LIGHTS))
+def test_lists_are_conservative_and_tight(device, rng, light_name, kind):
+    light, view_kind = LIGHTS[light_name]
+    # small primitives (fine level) and a few large ones (coarse level)
+    corners = np.concatenate([soup(rng, 250, 0.04), soup(rng, 12, 0.6)])
+    corners32, grid, lists = build(device, light, corners, BOUNDS, cells=6 * 40 * 40, kind=kind, capacity=16)
+    assert grid.views.kind == view_kind
+    entries, missing, extra = compare_with_reference(device, grid, lists, corners32)
+    assert entries > 0
+    assert missing == 0, f"{light_name}/{kind}: {missing} (cell, primitive) pairs missing of {entries}"
+    assert extra == 0, f"{light_name}/{kind}: {extra} entries farther than {UPPER_DELTA} cell from the projection"
+    assert lists.stats["entries"] == entries
+    if kind == "linked":
+        assert lists.stats["rebuilds"] == 1      # capacity 16 overflowed once, then grown to the count
+
+
+@pytest.mark.parametrize("light_name", list(LIGHTS))
+def test_quad_primitives(device, rng, light_name):
+    """Planar convex quads (the subpatches of the voxel method): the same guarantees."""
+    light, _ = LIGHTS[light_name]
+    centre = rng.uniform(-1, 1, (150, 1, 3))
+    a, b = rng.normal(0, 0.05, (150, 1, 3)), rng.normal(0, 0.05, (150, 1, 3))
+    s, t = np.array([0.0, 1.0, 1.2, -0.1])[None, :, None], np.array([0.0, 0.0, 1.0, 0.9])[None, :, None]
+    quads = centre + s * a + t * b                       # planar, convex (a parallelogram-ish shape)
+    quads[:10] = centre[:10] + s[:, :] * a[:10] * 12 + t * b[:10] * 12   # a few large ones
+    corners32, grid, lists = build(device, light, quads, BOUNDS, cells=5000)
+    entries, missing, extra = compare_with_reference(device, grid, lists, corners32)
+    assert entries > 0 and missing == 0 and extra == 0, (light_name, entries, missing, extra)
+
+
+def test_primitives_crossing_the_light_plane(device, rng):
+    """Triangles through the light's plane (single perspective view and cube): clipped, listed
+    conservatively, including the unbounded part that reaches the border cells."""
+    eye = np.array([0.0, 2.0, 0.0])
+    corners = []
+    for _ in range(60):
+        a = eye + rng.normal(0, 0.3, 3) + [0, 0.3, 0]        # above the light (behind a view looking down)
+        b = eye + rng.normal(0, 0.3, 3) - [0, 0.6, 0]
+        c = b + rng.normal(0, 0.2, 3)
+        corners.append([a, b, c])
+    corners = np.array(corners)
+    for bounds, view_kind in ((np.array([[-0.3, -1.0, -0.3], [0.3, 0.0, 0.3]]), "perspective"),
+                              (np.array([[-1.0, -1.0, -1.0], [1.0, 3.0, 1.0]]), "cube")):
+        corners32, grid, lists = build(device, sc.PointLight(eye), corners, bounds, cells=3000)
+        assert grid.views.kind == view_kind
+        entries, missing, extra = compare_with_reference(device, grid, lists, corners32)
+        assert missing == 0 and extra == 0, (view_kind, entries, missing, extra)
+
+
+@pytest.mark.parametrize("light_name", list(LIGHTS))
+def test_sampled_points_fall_in_listing_cells(device, rng, light_name):
+    """Independent of the reference's separating-axis code: points on each triangle's front part,
+    projected in float64, must be in a cell (fine or coarse) whose list holds that triangle."""
+    light, _ = LIGHTS[light_name]
+    corners = np.concatenate([soup(rng, 150, 0.05), soup(rng, 8, 0.7)])
+    corners32, grid, lists = build(device, light, corners, BOUNDS, cells=5000)
+    listed = dense(device, grid, lists, len(corners32))
+    u = rng.random((len(corners32), 40, 2))
+    u = np.where(u.sum(-1, keepdims=True) > 1, 1 - u, u)
+    c64 = corners32.astype(np.float64)
+    samples = c64[:, None, 0] + u[..., :1] * (c64[:, None, 1] - c64[:, None, 0]) + u[..., 1:] * (c64[:, None, 2] - c64[:, None, 0])
+    flat = samples.reshape(-1, 3)
+    prim = np.repeat(np.arange(len(corners32)), 40)
+    v = grid.views
+    if v.perspective:  # only points in front of the light are projected
+        front = np.ones(len(flat), bool) if v.kind == "cube" else (flat - v.eye) @ v.axes[0][2] > 1e-9
+        flat, prim = flat[front], prim[front]
+    fine, _ = ref.point_cells(flat, v.kind, v.eye, v.axes, v.windows, grid.nx, grid.ny)
+    # the coarse cell of each fine cell
+    fine_base = np.concatenate([[0], np.cumsum(grid.nx * grid.ny)])
+    view = np.searchsorted(fine_base, fine, side="right") - 1
+    local = fine - fine_base[view]
+    i, j = local % grid.nx[view], local // grid.nx[view]
+    coarse = grid.base1[view] + (j // ls.COARSE) * grid.nx1[view] + i // ls.COARSE
+    ok = listed[fine, prim] | listed[coarse, prim]
+    assert ok.all(), f"{light_name}: {int((~ok).sum())} of {len(ok)} sampled points not covered"
+
+
+def test_point_cells_match_reference(device, rng):
+    points = rng.uniform(-3, 3, (20000, 3))         # inside and far outside the window
+    for light_name, (light, _) in LIGHTS.items():
+        corners = soup(rng, 100, 0.05)
+        _, grid, _ = build(device, light, corners, BOUNDS, cells=4000)
+        fine, coarse, w = ls.point_cells(device, grid, points)
+        v = grid.views
+        want, w_ref = ref.point_cells(points, v.kind, v.eye, v.axes, v.windows, grid.nx, grid.ny)
+        valid = w_ref > 1e-6
+        differ = (fine != want) & valid
+        # float32 rounding can move a point lying within ~1e-4 cell of a cell border: count them, bound them
+        assert differ.sum() <= 2, f"{light_name}: {int(differ.sum())} points in another cell"
+        assert np.all(fine >= 0) and np.all(fine < grid.fine_cells)
+        assert np.all(coarse >= grid.fine_cells) and np.all(coarse < grid.cells)
+
+
+def test_points_outside_the_window_use_border_cells(device, rng):
+    corners = soup(rng, 50, 0.05, spread=0.2)
+    light = sc.DirectionalLight((0.0, -1.0, 0.0))
+    _, grid, _ = build(device, light, corners, np.array([[-0.3, 0, -0.3], [0.3, 0.2, 0.3]]), cells=400)
+    far = np.array([[100.0, 0, 100.0], [-100.0, 0, -100.0], [100.0, 0, -100.0], [1e6, 0, 0]])
+    fine, _, _ = ls.point_cells(device, grid, far)
+    i, j = fine % grid.nx[0], fine // grid.nx[0]
+    assert np.all((i == 0) | (i == grid.nx[0] - 1)) and np.all((j == 0) | (j == grid.ny[0] - 1))
+
+
+def test_linked_lists_equal_csr_lists(device, rng):
+    corners = np.concatenate([soup(rng, 300, 0.05), soup(rng, 5, 0.8)])
+    light = sc.PointLight((0.2, 4.0, 0.1))
+    _, grid, csr = build(device, light, corners, BOUNDS, cells=3000)
+    _, grid2, linked = build(device, light, corners, BOUNDS, cells=3000, kind="linked", capacity=1)
+    assert linked.stats["rebuilds"] == 1 and linked.capacity == linked.entries == csr.entries
+    assert np.array_equal(dense(device, grid, csr, len(corners)), dense(device, grid2, linked, len(corners)))
+
+
+@pytest.mark.parametrize("n", [1, 2, 1023, 1024, 1025, 4096, 524289, 700001])
+def test_prefix_sum_matches_numpy(device, rng, n):
+    counts = rng.integers(0, 50, n).astype(np.int32)
+    views = ls.fit_views(sc.DirectionalLight((0, -1, 0)), BOUNDS, np.zeros(3), 1.0)
+    grid = ls.make_grid(views, resolution=4)
+    builder = ls.ListBuilder(device)
+    offsets = device.empty(4 * (n + 1))
+    total = builder._scan(grid, device.to_device(counts), n, offsets)
+    got = device.from_device(offsets, n + 1, np.int32)
+    want = np.concatenate([[0], np.cumsum(counts)])
+    assert total == want[-1]
+    assert np.array_equal(got, want), f"scan of {n}: first difference at {int(np.argmax(got != want))}"
+
+
+def test_views_are_fitted_to_the_light(device):
+    lo_hi = np.array([[-1.0, 0.0, -1.0], [1.0, 0.5, 1.0]])
+    assert ls.fit_views(sc.DirectionalLight((0, -1, 0)), lo_hi, np.zeros(3), 1.0).kind == "orthographic"
+    assert ls.fit_views(sc.PointLight((0, 5, 0)), lo_hi, np.zeros(3), 1.0).kind == "perspective"
+    # above but close: the box corners are more than 60 degrees off the axis -> cube
+    assert ls.fit_views(sc.PointLight((0, 0.6, 0)), lo_hi, np.zeros(3), 1.0).kind == "cube"
+    assert ls.fit_views(sc.PointLight((0, 0.2, 0)), lo_hi, np.zeros(3), 1.0).kind == "cube"   # inside
+
+
+def test_window_fits_small_primitives_not_large_ones(device, rng):
+    """A ground-like large quad must not stretch the window: cells go where the small primitives are."""
+    small = soup(rng, 200, 0.01, spread=0.1)
+    ground = np.array([[[-5, -1, -5], [5, -1, -5], [5, -1, 5]], [[-5, -1, -5], [5, -1, 5], [-5, -1, 5]]], float)
+    corners = np.concatenate([small, ground]).astype(np.float32)
+    prims = device.to_device(corners)
+    views = ls.fit_views(sc.DirectionalLight((0, -1, 0)), np.array([[-5, -1, -5], [5, 1, 5.0]]), np.zeros(3), 10.0)
+    fitted = ls.fit_to_footprint(device, views, prims, len(corners))
+    u0, u1, v0, v1 = fitted.windows[0]
+    assert u1 - u0 < 0.5 and v1 - v0 < 0.5
+    assert fitted.weights[0] == 200
+
+
+BAD_INPUTS = [
+    (lambda d: ls.ListBuilder(d, corners=5), ValueError, r"corners: primitives have 3 or 4 corners"),
+    (lambda d: ls.fit_views("sun", BOUNDS, np.zeros(3), 1.0), TypeError, r"light: expected a PointLight"),
+    (lambda d: ls.make_grid(ls.fit_views(sc.PointLight((0, 0, 0)), BOUNDS, np.zeros(3), 1.0), resolution=0),
+     ValueError, r"resolution: must be between 1 and"),
+    (lambda d: ls.make_grid(ls.fit_views(sc.PointLight((0, 0, 0)), BOUNDS, np.zeros(3), 1.0), resolution=30000),
+     ValueError, r"resolution: .* cells do not fit 32-bit indices"),
+    (lambda d: ls.ListBuilder(d).build(ls.make_grid(ls.fit_views(sc.DirectionalLight((0, -1, 0)), BOUNDS, np.zeros(3), 1.0),
+                                                    resolution=16384), d.to_device(np.zeros((1, 3, 3), np.float32)), 1),
+     ValueError, r"light-space cell counts: needs .* MiB .* lower the resolution"),
+    (lambda d: ls.ListBuilder(d).build(ls.make_grid(ls.fit_views(sc.DirectionalLight((0, -1, 0)), BOUNDS, np.zeros(3), 1.0),
+                                                    resolution=4), d.to_device(np.zeros((1, 3, 3), np.float32)), 1, "tree"),
+     ValueError, r"lists: expected 'csr' or 'linked'"),
+]
+
+
+@pytest.mark.parametrize("call, error, message", BAD_INPUTS, ids=[m for _, _, m in BAD_INPUTS])
+def test_bad_input_is_named(device, call, error, message):
+    with pytest.raises(error, match=message):
+        call(device)
