@@ -1,0 +1,140 @@
+"""Reports of a bench run's results document: markdown table, speed-against-error plot, comparison."""
+
+from __future__ import annotations
+
+import itertools
+
+from peers import PEER
+
+AGREEMENT_BAR = 2e-5  # issue 3: exact and Embree differ on at most this fraction of receivers
+THROUGHPUT_BAR = 0.5  # issue 3: exact's throughput (prepare included) at least this times Embree's
+
+
+def _cell(value, digits: int = 3) -> str:
+    if value is None:
+        return ""
+    if isinstance(value, float):
+        return f"{value:.{digits}g}" if abs(value) < 1e5 else f"{value:.0f}"
+    return str(value)
+
+
+def _case(row: dict) -> tuple:
+    return row["scene"], row["light"]
+
+
+def bars(doc: dict) -> list[str]:
+    """Issue 3's bars per case: exact/Embree mask differences and their throughput ratio."""
+    if doc["settings"]["truth_method"] != "exact":
+        return ["Bars not assessed: the truth is Embree's mask (the exact method is not available)."]
+    lines = []
+    for (scene, light), group in itertools.groupby(doc["rows"], key=_case):
+        group = list(group)
+        peer = next((r for r in group if r["method"] == PEER), None)
+        if peer is not None:
+            fraction = peer["wrong"] / peer["receivers"]
+            verdict = "met" if fraction <= AGREEMENT_BAR else "MISSED"
+            lines.append(f"{scene} light {light}: exact and embreex differ on {peer['wrong']} of {peer['receivers']} "
+                         f"receivers ({fraction:.2g}; {peer['false_shadow']} embreex-only shadow, "
+                         f"{peer['false_light']} exact-only shadow); bar <= {AGREEMENT_BAR:g}: {verdict}")
+        for row in group:
+            if row["method"] == "exact" and row["vs_peer"] is not None:
+                verdict = "met" if row["vs_peer"] >= THROUGHPUT_BAR else "MISSED"
+                lines.append(f"{scene} light {light}: {row['label']} runs at {row['vs_peer']:.2f}x the fastest embreex "
+                             f"(prepare included); bar >= {THROUGHPUT_BAR}x: {verdict}")
+    return lines
+
+
+def markdown(doc: dict, plot_name: str | None = None) -> str:
+    """The run as markdown: machine, settings, cases, one table row per setting, the bars, the plot."""
+    m, s = doc["machine"], doc["settings"]
+    versions = ", ".join(f"{k} {v}" for k, v in m["versions"].items() if v)
+    lines = [
+        f"# shadowcl bench, {doc['date']}",
+        "",
+        f"- Machine: {m['cpu']}, {m['cores']} cores; OpenCL device {m['opencl_device']} ({m['opencl_platform']})",
+        f"- Versions: {versions}; Python {m['python']}",
+        f"- Truth: {s['truth']}",
+        f"- Receivers: {s['receivers']['ground']} + {s['receivers']['model']} per scene (seed {s['seed']}); "
+        f"{s['timing']}, {s['repeats']} repeats",
+        f"- Peer: {s['peer']}",
+        f"- Host memory: {doc['rows'][0]['memory_method'] if doc['rows'] else ''}",
+        *(f"- Skipped {name}: {why}" for name, why in s["skipped"].items()),
+        *(f"- Case {note}" for note in doc["cases"]),
+        *(f"- FAILED {f['scene']} light {f['light']} {f['label']}: {f['error']}" for f in doc["failed"]),
+        "",
+        "| scene | light | setting | prepare ms | classify ms | M recv/s | M recv/s (classify) | false shadow "
+        "| false light | error % | vs embreex | host MiB | device MiB |",
+        "|---|---|---|" + "---:|" * 10,
+    ]
+    for r in doc["rows"]:
+        cells = [r["scene"], r["light"], r["label"], 1e3 * r["prepare_s"], 1e3 * r["classify_s"],
+                 r["receivers_per_s"] / 1e6, r["receivers_per_s_classify"] / 1e6, r["false_shadow"],
+                 r["false_light"], r["error_percent"], r["vs_peer"], r["host_peak_mib"], r["device_mib"]]
+        lines.append("| " + " | ".join(_cell(c) for c in cells) + " |")
+    lines += ["", *(f"- {line}" for line in bars(doc))]
+    for row in doc["rows"]:
+        if row["method"] == PEER and row["method_stats"]:
+            stages = ", ".join(f"{key[:-2]} {1e3 * value:.0f} ms" for key, value in row["method_stats"].items())
+            lines.append(f"- {row['scene']} light {row['light']}, {row['label']}, stages of the last run: {stages}")
+    if plot_name:
+        lines += ["", f"![speed against error]({plot_name})"]
+    return "\n".join(lines) + "\n"
+
+
+def plot(doc: dict, path) -> None:
+    """Speed (receivers/s, prepare included) against error (%), log-log, one panel per case.
+
+    A setting with no error is drawn at half a receiver's worth of error, at the panel's left edge.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    cases = [(key, list(group)) for key, group in itertools.groupby(doc["rows"], key=_case)]
+    figure, axes = plt.subplots(1, max(len(cases), 1), figsize=(6 * max(len(cases), 1), 4.5), squeeze=False)
+    methods = sorted({r["method"] for r in doc["rows"]})
+    style = {name: (marker, f"C{i}") for i, (name, marker) in enumerate(zip(methods, itertools.cycle("os^Dv<>p*h")))}
+    for axis, ((scene, light), rows) in zip(axes[0], cases):
+        floor = 100 * 0.5 / rows[0]["receivers"]
+        for name in methods:
+            mine = [r for r in rows if r["method"] == name]
+            if not mine:
+                continue
+            x = [max(r["error_percent"], floor) for r in mine]
+            y = [r["receivers_per_s"] for r in mine]
+            marker, color = style[name]
+            axis.scatter(x, y, marker=marker, color=color, label=name)
+            for r, xi, yi in zip(mine, x, y):
+                text = r["label"][len(name):].strip()
+                if text:
+                    axis.annotate(text, (xi, yi), textcoords="offset points", xytext=(4, 3), fontsize=7)
+        axis.axvline(floor, color="0.8", linestyle=":", zorder=0)
+        axis.set_xlim(floor / 2, max([1000 * floor] + [2 * r["error_percent"] for r in rows]))
+        axis.set(xscale="log", yscale="log", title=f"{scene}, light {light} ({rows[0]['receivers']} receivers)",
+                 xlabel="misclassified receivers, % (dotted: none)", ylabel="receivers/s, prepare included")
+        axis.grid(True, which="both", alpha=0.3)
+        axis.legend(fontsize=8)
+    figure.suptitle(f"shadowcl: speed against error ({doc['machine']['cpu']}, {doc['date'][:10]})", fontsize=10)
+    figure.tight_layout()
+    figure.savefig(path, dpi=120)
+    plt.close(figure)
+
+
+def compare(doc: dict, old: dict) -> str:
+    """Markdown table of new/old time ratios (below 1 is faster now) and the error then and now,
+    for the settings both runs share."""
+    before = {(r["scene"], r["light"], r["label"]): r for r in old["rows"]}
+    counts = {(r["scene"], r["receivers"]) for r in doc["rows"]} ^ {(r["scene"], r["receivers"]) for r in old["rows"]}
+    warning = [f"Receiver counts differ between the runs: {sorted(counts)}", ""] if counts else []
+    lines = [f"Compared with the run of {old['date']} ({old['machine']['cpu']}):", "", *warning,
+             "| scene | light | setting | prepare new/old | classify new/old | total new/old | error % old → new |",
+             "|---|---|---|---:|---:|---:|---|"]
+    for r in doc["rows"]:
+        o = before.get((r["scene"], r["light"], r["label"]))
+        if o is not None:
+            ratios = [r[k] / o[k] if o[k] else None for k in ("prepare_s", "classify_s", "total_s")]
+            lines.append(f"| {r['scene']} | {r['light']} | {r['label']} | "
+                         + " | ".join(_cell(x) for x in ratios)
+                         + f" | {_cell(o['error_percent'])} → {_cell(r['error_percent'])} |")
+    return "\n".join(lines) + "\n"

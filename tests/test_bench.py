@@ -1,0 +1,138 @@
+"""Smoke test of the bench harness (bench/) on a tiny scene: receivers, the Embree peer, rows, reports.
+
+The harness is a bench extra (embreex, matplotlib): without them this module is skipped.
+"""
+
+import json
+import sys
+
+import numpy as np
+import pytest
+
+from conftest import PROJECT
+
+pytest.importorskip("embreex")
+pytest.importorskip("matplotlib")
+sys.path.insert(0, str(PROJECT / "bench"))
+
+import peers  # noqa: E402
+import receivers as rx  # noqa: E402
+import report  # noqa: E402
+import run  # noqa: E402
+from shadowcl import Mesh  # noqa: E402
+from shadowcl.methods import default_eps  # noqa: E402
+
+# A unit cube standing on y = 0, wound inwards on purpose: the scene must turn it outwards.
+CUBE_VERTICES = [(x, y, z) for x in (-0.5, 0.5) for y in (0.0, 1.0) for z in (-0.5, 0.5)]
+CUBE_FACES_OUTWARD = [(0, 1, 3), (0, 3, 2), (4, 6, 7), (4, 7, 5), (0, 4, 5), (0, 5, 1),
+                      (2, 3, 7), (2, 7, 6), (0, 2, 6), (0, 6, 4), (1, 5, 7), (1, 7, 3)]
+CUBE_INWARD = Mesh(CUBE_VERTICES, np.array(CUBE_FACES_OUTWARD)[:, ::-1])
+COUNTS = {"ground": 3000, "model": 1000}
+
+
+class AllLit:
+    """Stand-in method (not registered): nothing is in shadow."""
+
+    name = "all_lit"
+    parameters = {"label": ("a", "a dummy parameter, to exercise the sweep")}
+
+    def __init__(self, label="a"):
+        self.stats = {"device_bytes": 2**20}
+
+    def prepare(self, mesh, light, receiver_bounds, eps):
+        pass
+
+    def classify(self, points, normals):
+        return np.zeros(len(points), bool)
+
+
+def brute_force_mask(mesh, light, points, normals, eps):
+    """DESIGN.md's mask in float64 by testing every triangle (Moller-Trumbore), for small scenes."""
+    start = points + eps * normals
+    to_light = light.position - start
+    length = np.linalg.norm(to_light, axis=1)
+    d = to_light / length[:, None]
+    a, b, c = (mesh.triangles[:, i][None] for i in range(3))
+    e1, e2 = b - a, c - a
+    p = np.cross(d[:, None], e2)
+    det = np.einsum("nfi,nfi->nf", e1, p)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = start[:, None] - a
+        u = np.einsum("nfi,nfi->nf", s, p) / det
+        q = np.cross(s, e1)
+        v = np.einsum("ni,nfi->nf", d, q) / det
+        t = np.einsum("nfi,nfi->nf", e2, q) / det
+    hit = (det != 0) & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > eps) & (t < length[:, None])
+    away = np.einsum("ij,ij->i", normals, light.position - points) <= 0
+    return away | hit.any(axis=1)
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return rx.model_scene("cube", CUBE_INWARD)
+
+
+def test_model_scene_turns_the_model_outwards_and_splits_back(scene):
+    assert len(scene.mesh.faces) == 12 + 2
+    centre = scene.model.vertices.mean(axis=0)
+    face_centres = scene.model.triangles.mean(axis=1)
+    assert np.all(np.einsum("ij,ij->i", scene.model.face_normals, face_centres - centre) > 0)
+    model, ground_y = rx.split_ground(scene.mesh)
+    assert (len(model.faces), ground_y) == (12, 0.0)
+
+
+def test_receivers_are_seeded_and_where_they_belong(scene):
+    points, normals = rx.receivers(scene, **COUNTS, seed=3)
+    again, _ = rx.receivers(scene, **COUNTS, seed=3)
+    np.testing.assert_array_equal(points, again)
+    assert points.shape == normals.shape == (4000, 3)
+    np.testing.assert_allclose(np.linalg.norm(normals, axis=1), 1.0)
+    ground, model = slice(0, 3000), slice(3000, None)
+    assert np.all(points[ground, 1] == 0.0) and np.all(normals[ground] == [0, 1, 0])
+    assert np.all(np.abs(points[ground][:, [0, 2]]) <= 1.5)  # 3x the cube's footprint
+    assert np.all(np.abs(np.abs(points[model] - [0, 0.5, 0]).max(axis=1) - 0.5) < 1e-12)  # on the cube
+    generic, _ = rx.receivers(rx.BenchScene("any", scene.mesh, scene.lights, "test"), 50, 50)
+    assert generic.shape == (100, 3)
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_embree_peer_agrees_with_brute_force(scene, workers):
+    points, normals = rx.receivers(scene, **COUNTS)
+    light, eps = scene.lights[0], default_eps(scene.mesh.bounds)
+    peer = peers.EmbreePeer(workers)
+    try:
+        peer.prepare(scene.mesh, light, None, eps)
+        mask = peer.classify(points, normals)
+    finally:
+        peer.close()
+    expected = brute_force_mask(scene.mesh, light, points, normals, eps)
+    # Random receivers almost never send a ray within float32 rounding of an edge: allow 2 of 4000.
+    assert np.count_nonzero(mask != expected) <= 2, f"{np.count_nonzero(mask != expected)} differ"
+    assert 0 < expected.sum() < len(expected)
+
+
+def test_harness_rows_reports_and_compare(scene, device, tmp_path):
+    sweep = {"all_lit": {"label": ["a", "b"]}, "embreex": {"workers": [1]}}
+    doc = run.run_bench([scene], sweep, COUNTS, repeats=2, device=device,
+                        peers={**peers.PEERS, "all_lit": AllLit}, progress=False)
+    rows = doc["rows"]
+    assert [r["label"] for r in rows] == ["all_lit label=a", "all_lit label=b", "embreex workers=1"]
+    for row in rows[:2]:
+        assert row["false_shadow"] == 0 and row["false_light"] == row["in_shadow"] > 0
+        assert row["error_percent"] == pytest.approx(100 * row["in_shadow"] / 4000)
+        assert row["device_mib"] == 1.0 and row["host_peak_mib"] is not None
+    assert rows[2]["vs_peer"] == 1.0 and rows[2]["wrong"] <= 2
+    assert all(r["total_s"] > 0 and len(r["classify_runs_s"]) == 2 for r in rows)
+    doc = json.loads(json.dumps(doc, default=run.to_json))
+    table = report.markdown(doc, plot_name="plot.png")
+    assert table.count("| cube | 0 |") == 3 and "![speed against error](plot.png)" in table
+    report.plot(doc, tmp_path / "plot.png")
+    assert (tmp_path / "plot.png").stat().st_size > 0
+    assert report.compare(doc, doc).count("| 1 | 1 | 1 |") == 3
+
+
+def test_sweep_grid_expands_to_every_combination():
+    assert run.settings({}) == [{}]
+    grid = {"resolution": [256, 1024], "bias": ["slope", "normal"], "filter": ["pcf"]}
+    assert len(run.settings(grid)) == 4
+    assert run.label("shadow_map", run.settings(grid)[0]) == "shadow_map resolution=256 bias=slope filter=pcf"
