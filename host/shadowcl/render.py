@@ -30,9 +30,14 @@ class RenderResult:
     """An image and what went into it: per-light shadow masks of the covered pixels and stage times."""
 
     image: np.ndarray  # (H, W, 3) uint8
-    covered: np.ndarray  # (H, W) bool: pixels that see the scene
+    receivers: raster.Receivers  # covered pixels: mask (H, W), points, normals, triangle ids
     shadow: np.ndarray  # (L, M) bool: per light, per covered pixel in row-major order
     timings: dict[str, float] = field(default_factory=dict)  # seconds per stage
+
+    @property
+    def covered(self) -> np.ndarray:
+        """(H, W) bool: pixels that see the scene."""
+        return self.receivers.mask
 
 
 @contextmanager
@@ -54,6 +59,11 @@ def render_size(scene, width, height) -> tuple[int, int]:
     return width, height
 
 
+def camera_view(scene, width: int, height: int):
+    """The scene camera's view; the near plane at 1e-3 of the scene's size (reversed Z keeps depth precise)."""
+    return scene.camera.view(width, height, near=1e-3 * bounds_diagonal(scene.bounds))
+
+
 def render_report(scene, method: str = "exact", width=None, height=None, device=None, eps=None, progress=None, **params) -> RenderResult:
     """Render ``scene`` and return the image with masks and stage timings (see :func:`render`).
 
@@ -64,7 +74,7 @@ def render_report(scene, method: str = "exact", width=None, height=None, device=
     timings: dict[str, float] = {}
     mesh = scene.mesh
     eps = default_eps(scene.bounds) if eps is None else eps
-    view = scene.camera.view(width, height, near=1e-3 * bounds_diagonal(scene.bounds))
+    view = camera_view(scene, width, height)
     def stage(name):
         return _timed(timings, name, progress)
 
@@ -81,7 +91,7 @@ def render_report(scene, method: str = "exact", width=None, height=None, device=
             shadow[index] = shadower.classify(seen.points, seen.normals)
     with stage("shading"):
         image = _shade(scene, view, seen, shadow)
-    return RenderResult(image=image, covered=seen.mask, shadow=shadow, timings=timings)
+    return RenderResult(image=image, receivers=seen, shadow=shadow, timings=timings)
 
 
 def render(scene, method: str = "exact", width=None, height=None, device=None, eps=None, **params) -> np.ndarray:

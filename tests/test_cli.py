@@ -1,0 +1,46 @@
+"""The shadowcl command end to end."""
+
+import numpy as np
+from PIL import Image
+
+from shadowcl.cli import main
+
+
+def test_render_default_scene_writes_a_png_with_light_and_shadow(tmp_path, capsys):
+    out = tmp_path / "demo.png"
+    assert main(["render", "--out", str(out), "--size", "160x90"]) == 0
+    printed = capsys.readouterr().out
+    assert f"wrote {out.resolve()}" in printed
+    for stage in ("raster", "receivers", "prepare", "classify", "shading"):
+        assert f"{stage} " in printed
+    image = np.asarray(Image.open(out))
+    assert image.shape == (90, 160, 3)
+    # The ground (grey) appears both lit and in shadow: bright and dark grey pixels.
+    grey = (np.ptp(image.astype(int), axis=2) < 12)
+    brightness = image.mean(axis=2)
+    assert np.count_nonzero(grey & (brightness > 150)) > 100
+    assert np.count_nonzero(grey & (brightness < 110)) > 100
+
+
+def test_devices_and_methods_are_listed(capsys):
+    assert main(["devices"]) == 0
+    assert "0:0" in capsys.readouterr().out
+    assert main(["methods"]) == 0
+    listing = capsys.readouterr().out
+    assert "exact" in listing and "resolution" in listing
+
+
+def test_errors_are_one_line_with_exit_code_2(tmp_path, capsys):
+    assert main(["render", str(tmp_path / "missing.toml")]) == 2
+    assert "missing.toml" in capsys.readouterr().err
+    assert main(["render", "--method", "nope", "--size", "8x8", "--out", str(tmp_path / "x.png")]) == 2
+    assert "method: unknown method 'nope'" in capsys.readouterr().err
+
+
+def test_bad_size_is_a_usage_error(capsys):
+    import pytest
+
+    with pytest.raises(SystemExit) as exit_info:
+        main(["render", "--size", "wide"])
+    assert exit_info.value.code == 2
+    assert "--size: expected WIDTHxHEIGHT" in capsys.readouterr().err

@@ -1,0 +1,69 @@
+"""render: every shipped scene renders, and the default scene's shadows are the exact answer."""
+
+import numpy as np
+import pytest
+
+import shadowcl as sc
+from shadowcl.geometry import bounds_diagonal
+from shadowcl.reference import exact as exact_ref
+from shadowcl.methods import default_eps
+from shadowcl.render import render_report
+
+from conftest import SCENES, require_models
+
+SHIPPED = sorted(SCENES.glob("*.toml")) + sorted((SCENES / "hard").glob("*.toml"))
+
+
+@pytest.mark.parametrize("path", SHIPPED, ids=lambda p: p.relative_to(SCENES).as_posix())
+def test_every_shipped_scene_renders(path, device):
+    scene = sc.Scene.load(path)
+    result = render_report(scene, width=64, height=36, device=device)
+    assert result.image.shape == (36, 64, 3) and result.image.dtype == np.uint8
+    assert result.covered.any(), "the camera sees nothing of the scene"
+    assert result.shadow.shape == (len(scene.lights), result.covered.sum())
+
+
+@pytest.mark.parametrize("name", ["bunny", "teapot", "ogre"])
+def test_model_scenes_render(name, device):
+    require_models()
+    scene = sc.Scene.load(SCENES / "models" / f"{name}.toml")
+    result = render_report(scene, width=80, height=45, device=device)
+    assert result.covered.any() and result.shadow.any()
+
+
+def test_default_scene_shadows_are_exact(device):
+    scene = sc.Scene.load(SCENES / "default.toml")
+    result = render_report(scene, width=120, height=68, device=device)
+    shadow = result.shadow[0]
+    assert 0.05 < shadow.mean() < 0.6, "the demo should show lit and shadowed surfaces"
+
+    seen = result.receivers
+    v, f = scene.mesh.vertices, scene.mesh.faces
+    eps = default_eps(scene.bounds)
+    truth = exact_ref.shadow_mask(v, f, scene.light, seen.points, seen.normals, eps=eps)
+    # Receivers whose segment passes within 2e-6 of the scene size (~10 float32 ulps of its coordinates)
+    # of a triangle edge may go either way on the device; everywhere else the masks must agree. A wider
+    # band would also catch ground points near the ground's own edges under grazing light, whose segment
+    # starts only eps * sin(elevation) above the edge: those are decided, not ambiguous.
+    band = 2e-6 * bounds_diagonal(scene.bounds)
+    near_edge = exact_ref.segment_edge_distance(v, f, scene.light, seen.points, seen.normals, eps) < band
+    differ = shadow != truth
+    assert not np.any(differ & ~near_edge), f"{np.count_nonzero(differ & ~near_edge)} receivers differ away from edges"
+    assert near_edge.mean() < 0.01
+
+
+def test_shadowed_pixels_are_darker(device):
+    scene = sc.Scene.load(SCENES / "default.toml")
+    result = render_report(scene, width=96, height=54, device=device)
+    pixels = result.image.reshape(-1, 3)[result.covered.ravel()].astype(float).sum(axis=1)
+    ground = scene.object_ids()[result.receivers.triangle] == 0
+    shadow = result.shadow[0]
+    assert pixels[ground & shadow].mean() < 0.7 * pixels[ground & ~shadow].mean()
+
+
+def test_render_rejects_bad_sizes(device):
+    scene = sc.Scene.load(SCENES / "default.toml")
+    with pytest.raises(ValueError, match="width: must be between 1 and"):
+        sc.render(scene, width=0, height=10, device=device)
+    with pytest.raises(TypeError, match="height: expected an integer"):
+        sc.render(scene, width=10, height=2.5, device=device)
