@@ -48,7 +48,12 @@ from shadowcl.metrics import mask_error
 SWEEP = {
     "exact": {},
     "embreex": {"workers": [1, 2]},
+    # the default settings across resolutions; the full grid (bias x filter at every resolution, 8192
+    # included: ~3 GB for a cube) is FULL_SWEEP, run with --full-sweep
+    "shadow_map": {"resolution": [256, 1024, 2048, 4096]},
 }
+FULL_SWEEP = {**SWEEP, "shadow_map": {"resolution": [256, 1024, 2048, 4096, 8192],
+                                      "bias": ["constant", "slope", "normal"], "filter": ["nearest", "bilinear", "pcf"]}}
 FULL = {"ground": 1_000_000, "model": 200_000}
 QUICK = {"ground": 80_000, "model": 20_000}
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -330,6 +335,7 @@ def main(argv=None) -> None:
                         help="model names (bunny, ogre, teapot) or .toml scene files")
     parser.add_argument("--methods", nargs="+", default=list(SWEEP),
                         help="methods and peers to run (their SWEEP grid, else defaults)")
+    parser.add_argument("--full-sweep", action="store_true", help="every setting of FULL_SWEEP, not SWEEP's subset")
     parser.add_argument("--repeats", type=int, help="timed runs per setting (default 5, 3 with --quick)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", type=Path, default=RESULTS, help="folder for STEM.json, .md and .png")
@@ -338,7 +344,8 @@ def main(argv=None) -> None:
 
     counts = QUICK if args.quick else FULL
     repeats = args.repeats or (3 if args.quick else 5)
-    doc = run_bench([rx.load_scene(s) for s in args.scenes], {m: SWEEP.get(m, {}) for m in args.methods},
+    sweep = FULL_SWEEP if args.full_sweep else SWEEP
+    doc = run_bench([rx.load_scene(s) for s in args.scenes], {m: sweep.get(m, {}) for m in args.methods},
                     counts, repeats, args.seed)
     doc["settings"]["quick"] = args.quick
     stem = ("quick-" if args.quick else "run-") + datetime.now().strftime("%Y%m%d-%H%M%S")

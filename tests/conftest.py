@@ -27,3 +27,11 @@ def require_models():
     if not MODELS.is_dir():
         pytest.skip(f"real meshes not found at {MODELS}")
     return MODELS
+
+
+@pytest.fixture
+def small_buffer_device(device, monkeypatch):
+    """The device, allowing at most 256 MiB per buffer: PoCL reports a limit that follows free memory,
+    so tests of the "does not fit" errors set one instead of depending on the machine."""
+    monkeypatch.setattr(type(device), "max_alloc_bytes", property(lambda self: 256 << 20))
+    return device

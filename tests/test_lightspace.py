@@ -248,6 +248,6 @@ BAD_INPUTS = [
 
 
 @pytest.mark.parametrize("call, error, message", BAD_INPUTS, ids=[m for _, _, m in BAD_INPUTS])
-def test_bad_input_is_named(device, call, error, message):
+def test_bad_input_is_named(small_buffer_device, call, error, message):
     with pytest.raises(error, match=message):
-        call(device)
+        call(small_buffer_device)

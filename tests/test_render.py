@@ -67,3 +67,17 @@ def test_render_rejects_bad_sizes(device):
         sc.render(scene, width=0, height=10, device=device)
     with pytest.raises(TypeError, match="height: expected an integer"):
         sc.render(scene, width=10, height=2.5, device=device)
+
+
+def test_far_offset_scene_renders_like_the_default(device):
+    # The same scene 1e5 away from the origin: float32 world coordinates there are 0.008 apart, so
+    # vertices move by up to 0.004 (1e-4 of the scene) and only pixels along shadow edges may change.
+    near = render_report(sc.Scene.load(SCENES / "default.toml"), width=160, height=90, device=device)
+    far = render_report(sc.Scene.load(SCENES / "hard" / "far_offset.toml"), width=160, height=90, device=device)
+    assert np.array_equal(near.covered, far.covered) or (near.covered != far.covered).mean() < 0.002
+    both = near.covered & far.covered
+    near_shadow = np.zeros(both.shape, bool)
+    far_shadow = np.zeros(both.shape, bool)
+    near_shadow[near.covered] = near.shadow[0]
+    far_shadow[far.covered] = far.shadow[0]
+    assert (near_shadow != far_shadow)[both].mean() < 0.005

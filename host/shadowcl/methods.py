@@ -31,6 +31,7 @@ from .lights import check_light
 # name -> "module:Class"; imported on first use so one method's dependencies never slow another.
 METHODS = {
     "exact": "shadowcl.exact:ExactMethod",
+    "shadow_map": "shadowcl.shadow_map:ShadowMapMethod",
 }
 
 EPS_FRACTION = 1e-4  # default eps as a fraction of the scene's bounding-box diagonal (DESIGN.md)

@@ -2,6 +2,9 @@
 
 Pipeline: raster kernel (camera Z-buffer) → receivers (world position and normal per covered pixel)
 → the method's mask per light → shading. A shadowed point gets ambient light only from that light.
+A method with fractional visibility (``visibility(points, normals)``, e.g. the shadow map's
+percentage-closer filter) shades with it; ``post_filter`` low-passes each light's visibility over the
+image, Williams' post-filter of the shadow image.
 """
 
 from __future__ import annotations
@@ -32,6 +35,7 @@ class RenderResult:
     image: np.ndarray  # (H, W, 3) uint8
     receivers: raster.Receivers  # covered pixels: mask (H, W), points, normals, triangle ids
     shadow: np.ndarray  # (L, M) bool: per light, per covered pixel in row-major order
+    visibility: np.ndarray  # (L, M) float32 in [0, 1], what shading used (1 - shadow for boolean methods)
     timings: dict[str, float] = field(default_factory=dict)  # seconds per stage
 
     @property
@@ -64,11 +68,15 @@ def camera_view(scene, width: int, height: int):
     return scene.camera.view(width, height, near=1e-3 * bounds_diagonal(scene.bounds))
 
 
-def render_report(scene, method: str = "exact", width=None, height=None, device=None, eps=None, progress=None, **params) -> RenderResult:
+def render_report(scene, method: str = "exact", width=None, height=None, device=None, eps=None, progress=None,
+                  post_filter: int = 0, **params) -> RenderResult:
     """Render ``scene`` and return the image with masks and stage timings (see :func:`render`).
 
-    ``progress``, if given, is called with the name of each stage as it starts.
+    ``progress``, if given, is called with the name of each stage as it starts. ``post_filter``
+    (pixels) box-filters each light's visibility over a (2k + 1)^2 window of covered pixels before
+    shading; ``shadow`` stays the method's own mask.
     """
+    post_filter = positive_int("post_filter", post_filter, minimum=0, maximum=MAX_SIDE)
     device = get_device(device)
     width, height = render_size(scene, width, height)
     timings: dict[str, float] = {}
@@ -83,15 +91,23 @@ def render_report(scene, method: str = "exact", width=None, height=None, device=
     with stage("receivers"):
         seen = raster.receivers(device, mesh, view, zbuffer)
     shadow = np.zeros((len(scene.lights), len(seen.points)), dtype=bool)
+    visibility = np.ones(shadow.shape, dtype=np.float32)
     for index, light in enumerate(scene.lights):
         shadower = create_method(method, device, **params)
         with stage("prepare"):
             shadower.prepare(mesh, light, scene.bounds, eps)
         with stage("classify"):
-            shadow[index] = shadower.classify(seen.points, seen.normals)
+            if hasattr(shadower, "visibility"):
+                visibility[index] = shadower.visibility(seen.points, seen.normals)
+                shadow[index] = visibility[index] < 0.5
+            else:
+                shadow[index] = shadower.classify(seen.points, seen.normals)
+                visibility[index] = ~shadow[index]
     with stage("shading"):
-        image = _shade(scene, view, seen, shadow)
-    return RenderResult(image=image, receivers=seen, shadow=shadow, timings=timings)
+        if post_filter:
+            visibility = np.stack([_box_filter(seen, v, post_filter) for v in visibility])
+        image = _shade(scene, view, seen, visibility)
+    return RenderResult(image=image, receivers=seen, shadow=shadow, visibility=visibility, timings=timings)
 
 
 def render(scene, method: str = "exact", width=None, height=None, device=None, eps=None, **params) -> np.ndarray:
@@ -104,14 +120,28 @@ def render(scene, method: str = "exact", width=None, height=None, device=None, e
     return render_report(scene, method, width, height, device, eps, **params).image
 
 
-def _shade(scene, view, seen, shadow: np.ndarray) -> np.ndarray:
+def _box_filter(seen, values: np.ndarray, k: int) -> np.ndarray:
+    """Mean of ``values`` (one per covered pixel) over the covered pixels of each (2k + 1)^2 window:
+    the background does not bleed into the shadow image."""
+    def window_sums(image: np.ndarray) -> np.ndarray:
+        padded = np.pad(image, k + 1)[:-1, :-1].cumsum(0).cumsum(1)   # summed-area table, zero row/col first
+        n = 2 * k + 1
+        return padded[n:, n:] - padded[:-n, n:] - padded[n:, :-n] + padded[:-n, :-n]
+
+    image = np.zeros(seen.mask.shape)
+    image.ravel()[seen.pixel_index] = values
+    sums, counts = window_sums(image), window_sums(seen.mask.astype(np.float64))
+    return (sums.ravel()[seen.pixel_index] / counts.ravel()[seen.pixel_index]).astype(np.float32)
+
+
+def _shade(scene, view, seen, visibility: np.ndarray) -> np.ndarray:
     colors = scene.triangle_colors[seen.triangle]
     light_sum = np.zeros(len(seen.points))
-    for light, shadowed in zip(scene.lights, shadow):
+    for light, lit in zip(scene.lights, visibility):
         to_light = light.direction_to_light(seen.points)
         to_light /= np.linalg.norm(to_light, axis=1, keepdims=True)
         lambert = np.clip(np.einsum("ij,ij->i", seen.normals, to_light), 0.0, None)
-        light_sum += np.where(shadowed, 0.0, lambert)
+        light_sum += lit * lambert
     radiance = colors * (AMBIENT + (1.0 - AMBIENT) * np.clip(light_sum, 0.0, 1.0))[:, None]
 
     rows = np.linspace(0.0, 1.0, view.height)[:, None, None]

@@ -1,0 +1,135 @@
+"""Reference shadow-map test in NumPy float64: the oracle of ``tests/test_shadow_map.py``.
+
+Written from Williams (1978) and the contract of ``kernels/shadow_map.cl``, without calling the
+method's host code: it takes the light's depth maps and view records as plain arrays (what
+``ShadowMapMethod.prepare`` built, or maps from ``reference/raster.py``) and repeats the test:
+
+1. A receiver whose normal faces away from the light (``dot <= 0``) has visibility 0.
+2. Texel footprint ``T``: texel size times ``|d|^2 / (d . forward)`` in perspective (``d`` from the
+   eye; the texel's width across the ray at the receiver), the texel size orthographically.
+3. Bias (``bias = (constant, slope)`` in texels): the receiver may lie ``constant T`` behind the stored
+   surface; "slope" adds ``slope T min(tan theta, 16)``; "normal" lifts it ``slope T sin theta`` along its
+   normal first. Without normals only the constant applies.
+4. Transform by the view matrix into texel coordinates (centres at integers, row 0 at the top), add
+   the dither (lowbias32 hash of ``seed`` and the index), and compare distances along the view axis:
+   lit where the stored surface is not nearer than the receiver's distance minus the bias. Nearest:
+   the texel containing the point; bilinear: the depths interpolated first; pcf: the fraction of
+   the ``k x k`` texels around the nearest that are lit. Texel indices are clamped to the map.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+TAN_MAX = 16.0
+FILTERS = ("nearest", "bilinear", "pcf")
+BIASES = ("constant", "slope", "normal")
+
+
+def hash32(x: np.ndarray) -> np.ndarray:
+    """Lowbias32 on uint32 arrays (wrapping multiplies)."""
+    x = np.asarray(x, dtype=np.uint32)
+    with np.errstate(over="ignore"):
+        x = x ^ (x >> np.uint32(16))
+        x = x * np.uint32(0x7FEB352D)
+        x = x ^ (x >> np.uint32(15))
+        x = x * np.uint32(0x846CA68B)
+        x = x ^ (x >> np.uint32(16))
+    return x
+
+
+def dither_offsets(n: int, seed: int) -> np.ndarray:
+    """(n, 2) the +-0.5 texel noise of receivers 0..n-1."""
+    index = np.arange(n, dtype=np.uint64)
+    out = np.empty((n, 2))
+    for axis in range(2):
+        h = hash32(np.uint32(seed) ^ hash32((2 * index + axis).astype(np.uint32)))
+        out[:, axis] = (h >> np.uint32(8)).astype(np.float64) * 2.0**-24 - 0.5
+    return out
+
+
+def distance_of(depth: np.ndarray, record: np.ndarray, perspective: bool) -> np.ndarray:
+    near, far = float(record[17]), float(record[18])
+    if perspective:
+        with np.errstate(divide="ignore"):
+            return np.where(depth > 0, near / np.where(depth > 0, depth, 1.0), np.inf)
+    return far - depth * (far - near)
+
+
+def texel_coordinates(points_rel: np.ndarray, record: np.ndarray, res: int):
+    """(s, t, depth) of points relative to the maps' origin: texel centres at integers."""
+    m = np.asarray(record[:16], dtype=np.float64).reshape(4, 4)
+    clip = points_rel @ m[:, :3].T + m[:, 3]
+    x, y, z = (clip[:, k] / clip[:, 3] for k in range(3))
+    return (x + 1) * 0.5 * res - 0.5, (1 - y) * 0.5 * res - 0.5, z
+
+
+def lit_fraction(depth_map, record, perspective, s, t, reach, filter, pcf_size=3):
+    res = depth_map.shape[0]
+
+    def at(r, c):
+        return depth_map[np.clip(r, 0, res - 1), np.clip(c, 0, res - 1)].astype(np.float64)
+
+    if filter == "bilinear":
+        s0, t0 = np.floor(s), np.floor(t)
+        fs, ft = s - s0, t - t0
+        c, r = s0.astype(np.int64), t0.astype(np.int64)
+        top = at(r, c) + fs * (at(r, c + 1) - at(r, c))
+        bottom = at(r + 1, c) + fs * (at(r + 1, c + 1) - at(r + 1, c))
+        return (distance_of(top + ft * (bottom - top), record, perspective) >= reach).astype(np.float64)
+    c, r = np.floor(s + 0.5).astype(np.int64), np.floor(t + 0.5).astype(np.int64)
+    half = 0 if filter == "nearest" else pcf_size // 2
+    lit = np.zeros(len(s))
+    for dr in range(-half, half + 1):
+        for dc in range(-half, half + 1):
+            lit += distance_of(at(r + dr, c + dc), record, perspective) >= reach
+    return lit / (2 * half + 1) ** 2
+
+
+def visibility(points_rel, normals, kind, to_light, views, depth, bias, bias_mode="slope", filter="bilinear",
+               pcf_size=3, dither=0, seed=0, perturb=(0.0, 0.0, 0.0)):
+    """(N,) visibility in [0, 1] of points relative to the maps' origin (see the module docstring).
+
+    ``perturb`` = (ds, dt, relative reach change) moves every decision slightly: the tests call it
+    with small perturbations to find the receivers that float32 rounding may decide either way.
+    """
+    p = np.asarray(points_rel, dtype=np.float64).copy()
+    n = len(p)
+    perspective = kind != "orthographic"
+    to_light = np.asarray(to_light, dtype=np.float64)
+    light_dir = to_light - p if perspective else np.broadcast_to(to_light, p.shape)
+    light_dir = light_dir / np.linalg.norm(light_dir, axis=1, keepdims=True)
+    face = np.zeros(n, dtype=np.int64)
+    if kind == "cube":
+        e = p - to_light
+        axis = np.argmax(np.abs(e), axis=1)             # ties: the lowest axis, as the kernel
+        face = 2 * axis + (e[np.arange(n), axis] < 0)
+    records = np.asarray(views, dtype=np.float64)[face]
+    if perspective:
+        e = p - to_light
+        w_axis = np.einsum("ij,ij->i", p, records[:, 12:15]) + records[:, 15]
+        texel = records[:, 16] * np.einsum("ij,ij->i", e, e) / w_axis
+    else:
+        texel = records[:, 16]
+    offset = bias[0] * texel
+    facing = np.ones(n, dtype=bool)
+    if normals is not None:
+        normals = np.asarray(normals, dtype=np.float64)
+        cosine = np.einsum("ij,ij->i", normals, light_dir)
+        facing = cosine > 0
+        sine = np.sqrt(np.maximum(1 - cosine**2, 0))
+        if bias_mode == "slope":
+            with np.errstate(divide="ignore", invalid="ignore"):
+                offset = offset + bias[1] * texel * np.minimum(sine / cosine, TAN_MAX)
+        elif bias_mode == "normal":
+            p = p + (bias[1] * texel * sine)[:, None] * normals
+    out = np.zeros(n)
+    res = depth.shape[1]
+    jitter = dither_offsets(n, seed) if dither else np.zeros((n, 2))
+    for f in np.unique(face):
+        sel = np.flatnonzero((face == f) & facing)
+        s, t, z = texel_coordinates(p[sel], views[f], res)
+        s, t = s + jitter[sel, 0] + perturb[0], t + jitter[sel, 1] + perturb[1]
+        reach = distance_of(z, views[f], perspective) * (1 + perturb[2]) - offset[sel]
+        out[sel] = lit_fraction(depth[f], views[f], perspective, s, t, reach, filter, pcf_size)
+    return out

@@ -1,0 +1,273 @@
+"""Shadow maps (Williams 1978): the light's depth map(s) from the raster kernel, then a depth test per receiver.
+
+``prepare`` fits the light's view(s) to the receivers exactly as the exact method does
+(:func:`shadowcl.lightspace.fit_views`: orthographic for a directional light, one perspective view
+for a point light outside the receivers' box whose frustum stays within 120 degrees, else a cube of six
+faces), makes each window square, and draws each view's depth map with :func:`shadowcl.raster.rasterize`
+(one rasterizer, two views). ``classify`` runs ``kernels/shadow_map.cl``: each receiver is transformed
+into light space and compared with the stored depth.
+
+The paper's remedies, as parameters:
+
+- ``bias``: how far behind the stored surface a receiver may lie and still be lit, in units of the
+  texel footprint ``T`` at the receiver (the width of one texel across the light's ray there):
+  ``"constant"`` ``T * bias_scale * (0.5 + 2 r)``; ``"slope"`` ``T * bias_scale * (0.5 + r tan(theta))``
+  (theta the angle between normal and light, tan capped at 16); ``"normal"``: the receiver is first
+  lifted ``T * bias_scale * r sin(theta)`` along its normal, then compared with ``T * bias_scale * 0.5``.
+  ``r`` is how far (in texels) the filter's samples reach from the receiver's exact projection, where a
+  lit plane's stored depth differs from the receiver's: the nearest texel's centre is up to 0.71
+  texels away, bilinear interpolation reproduces a plane (0.5 covers curvature), a k x k
+  percentage-closer filter reaches 0.71 k; the dither adds 0.71. Without normals, slope and normal
+  offset fall back to the constant term ``0.5 T``.
+- ``filter``: ``"nearest"``; ``"bilinear"`` (Williams: interpolate the light's depths at the exact
+  transformed X, Y, then compare); ``"pcf"`` (percentage-closer filtering of ``pcf_size`` squared texels:
+  fractional visibility).
+- ``dither``: Williams' noise of +-0.5 texel added to the transformed X and Y, a hash of ``seed`` and the
+  receiver's index in the ``classify`` call (reproducible).
+
+:meth:`ShadowMapMethod.visibility` gives the fractional visibility in [0, 1]; ``classify`` thresholds it:
+in shadow below 0.5. A normal facing away from the light is in shadow (visibility 0).
+
+Defaults (bias "normal", filter "bilinear", 2048 texels; measured on the bench's bunny, ogre and
+teapot scenes, 1.2 M receivers, against the exact method): misclassified 0.099 %, 0.161 %, 0.053 % at
+2048 and 0.069 %, 0.077 %, 0.037 % at 4096; the normal offset with bilinear depth is also the only
+setting whose lit plane stays clean at every elevation tested (0.5 degrees and up: see the tests).
+The slope bias with nearest lookup is as good on the bunny at 2048 but self-shadows a plane below
+about 5 degrees of elevation; pcf filtering trades false shadow for light leaks (its bias grows with
+its reach).
+
+Which form of the paper: the method transforms whatever points it is given. ``render`` gives it only
+the camera-visible surface points (the paper's post-process form); the bench gives it points as
+generated, visible or not (the paper's "correct" form). The test of a given point is the same in both.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import lightspace, raster
+from .checks import positive_float, positive_int
+from .geometry import Mesh, bounds_diagonal
+from .lights import check_light
+from .views import View
+
+BIASES = ("constant", "slope", "normal")
+FILTERS = ("nearest", "bilinear", "pcf")
+DEFAULT_RESOLUTION = 2048
+MAX_RESOLUTION = raster.MAX_SIDE
+VIEW_FLOATS = 20            # kernels/shadow_map.cl
+CONSTANT_TEXELS = 0.5       # the constant term of every bias, in texels: rounding and curvature
+CONSTANT_TAN = 2.0          # tan(theta) the "constant" bias covers (~63 degrees)
+NEAREST_REACH = math.sqrt(0.5)   # farthest a nearest texel's centre lies from the projection, in texels
+BILINEAR_REACH = 0.5
+_GROUP = 64
+
+
+@dataclass(frozen=True, eq=False)
+class LightMaps:
+    """What ``prepare`` built: the light's views and their depth maps, in the frame at ``origin``.
+
+    ``views`` (V, VIEW_FLOATS) float32 is the kernel's view table: row-major clip matrix of positions
+    relative to ``origin``, then texels' size (tangent units in perspective, scene units orthographic),
+    near and far distance. ``depth`` holds V (R, R) float32 reversed-Z maps (1 nearest, 0 empty).
+    """
+
+    kind: str                 # "orthographic" | "perspective" | "cube"
+    origin: np.ndarray        # (3,) float64 world position the views are relative to
+    to_light: np.ndarray      # (3,) float64: the eye (relative) for perspective, else unit direction to the light
+    views: np.ndarray
+    depth: tuple
+    raster_views: tuple       # the View each map was drawn with
+
+
+class ShadowMapMethod:
+    """Williams' shadow map: prepare draws the light's depth map(s), classify compares receivers with them."""
+
+    name = "shadow_map"
+    parameters = {
+        "resolution": (None, f"texels per side of each (square) depth map; None picks {DEFAULT_RESOLUTION}"),
+        "bias": ("normal", "depth bias: 'constant', 'slope' (slope-scaled) or 'normal' (normal offset)"),
+        "bias_scale": (1.0, "multiplies the default bias, which is derived from the texel footprint"),
+        "filter": ("bilinear", "'nearest', 'bilinear' (Williams' interpolated depth) or 'pcf' (percentage closer)"),
+        "pcf_size": (3, "texels per side of the percentage-closer filter (odd)"),
+        "dither": (0, "1: Williams' +-0.5 texel noise on the transformed coordinates"),
+        "seed": (0, "seed of the dither's hash"),
+    }
+
+    def __init__(self, device, resolution=None, bias="normal", bias_scale=1.0, filter="bilinear", pcf_size=3,
+                 dither=0, seed=0):
+        self.device = device
+        self.resolution = None if resolution is None else positive_int("resolution", resolution, 1, MAX_RESOLUTION)
+        self.bias = _choice("bias", bias, BIASES)
+        self.bias_scale = positive_float("bias_scale", bias_scale)
+        self.filter = _choice("filter", filter, FILTERS)
+        self.pcf_size = positive_int("pcf_size", pcf_size, 1, 15)
+        if self.pcf_size % 2 == 0:
+            raise ValueError(f"pcf_size: must be odd (centred on the receiver's texel), got {pcf_size}")
+        self.dither = _choice("dither", dither, (0, 1))
+        self.seed = positive_int("seed", seed, 0, 2**32 - 1)
+        self.maps: LightMaps | None = None
+        self._views_dev = self._depth_dev = None   # the view table and maps on the device, for classify
+
+    # Prepare ------------------------------------------------------------------------------------
+    def prepare(self, mesh: Mesh, light, receiver_bounds: np.ndarray, eps: float) -> None:
+        """Fit the light's view(s) to ``receiver_bounds`` and draw ``mesh``'s depth map in each.
+
+        ``eps`` is not used: the bias, in texel footprints, is what keeps a lit surface lit here.
+        Raises ``ValueError`` when a map of ``resolution`` texels does not fit in one device buffer.
+        """
+        if not isinstance(mesh, Mesh):
+            raise TypeError(f"mesh: expected a shadowcl.Mesh, got {type(mesh).__name__}")
+        light = check_light(light)
+        receiver_bounds = np.asarray(receiver_bounds, dtype=np.float64)
+        box = np.stack([np.minimum(mesh.bounds[0], receiver_bounds[0]), np.maximum(mesh.bounds[1], receiver_bounds[1])])
+        origin = 0.5 * (box[0] + box[1])
+        scale = max(bounds_diagonal(box), 1e-30)
+        resolution = self.resolution or DEFAULT_RESOLUTION
+        fitted = lightspace.fit_views(light, receiver_bounds, origin, scale)
+        _check_fits(self.device, resolution)
+        corners = lightspace.box_corners(box - origin)
+        near = _cube_near(mesh, fitted.eye + origin, scale) if fitted.kind == "cube" else None
+        views = [_view(fitted, k, origin, corners, near, scale, resolution) for k in range(fitted.nviews)]
+        zbuffers = [raster.rasterize(self.device, mesh, view) for view, _ in views]
+        to_light = fitted.eye if fitted.perspective else -np.asarray(light.direction, dtype=np.float64)
+        records = np.stack([record for _, record in views])
+        self.maps = LightMaps(fitted.kind, origin, to_light, records, tuple(z.depth for z in zbuffers),
+                              tuple(view for view, _ in views))
+        self._views_dev = self.device.to_device(records)
+        # raster keeps each Z-buffer's depth on the device: the kernel reads those buffers, one argument
+        # per cube face (a single view repeats its map), rather than a stacked copy (100 MB at 2048)
+        self._depth_dev = tuple(zbuffers[k % len(zbuffers)]._depth_dev for k in range(6))
+
+    # Classify -----------------------------------------------------------------------------------
+    def visibility(self, points: np.ndarray, normals: np.ndarray | None) -> np.ndarray:
+        """(N,) float32 in [0, 1]: the filtered fraction of the light's depth samples not occluding each point."""
+        if self.maps is None:
+            raise RuntimeError("shadow_map: call prepare() before classify() or visibility()")
+        maps, device = self.maps, self.device
+        points = np.asarray(points, dtype=np.float64)
+        if points.ndim != 2 or points.shape[1] != 3:
+            raise ValueError(f"points: expected shape (N, 3), got {points.shape}")
+        if normals is not None and np.shape(normals) != points.shape:
+            raise ValueError(f"normals: expected shape {points.shape} to match points, got {np.shape(normals)}")
+        n = len(points)
+        if n == 0:
+            return np.zeros(0, dtype=np.float32)
+        visibility_dev = device.empty(4 * n, "visibility")
+        relative = np.ascontiguousarray(points - maps.origin, dtype=np.float32)
+        normals_np = np.zeros(1, np.float32) if normals is None else np.ascontiguousarray(normals, dtype=np.float32)
+        kernel = device.kernel("shadow_map.cl", "shadow_visibility", self._options(normals is not None))
+        kernel(device.queue, (-(-n // _GROUP) * _GROUP,), (_GROUP,),
+               device.to_device(relative), device.to_device(normals_np),
+               np.array([*maps.to_light, 0.0], dtype=np.float32), self._views_dev,
+               *self._depth_dev, self.bias_texels(), np.uint32(self.seed), np.int32(n), visibility_dev)
+        return device.from_device(visibility_dev, n, np.float32)
+
+    def classify(self, points: np.ndarray, normals: np.ndarray | None) -> np.ndarray:
+        """bool (N,): True = in shadow, where the visibility is below 0.5."""
+        return self.visibility(points, normals) < 0.5
+
+    def bias_texels(self) -> np.ndarray:
+        """(constant, slope or lift) coefficients of the bias in texel footprints (see the module docstring)."""
+        constant = CONSTANT_TEXELS + (CONSTANT_TAN * self.reach() if self.bias == "constant" else 0.0)
+        return np.array([constant, self.reach()], dtype=np.float32) * np.float32(self.bias_scale)
+
+    def reach(self) -> float:
+        """How far, in texels, the filter's samples lie from a receiver's exact projection (sets the bias)."""
+        reach = {"nearest": NEAREST_REACH, "bilinear": BILINEAR_REACH,
+                 "pcf": NEAREST_REACH * self.pcf_size}[self.filter]
+        return reach + NEAREST_REACH * self.dither
+
+    @property
+    def stats(self) -> dict:
+        maps = self.maps
+        return {} if maps is None else {"kind": maps.kind, "views": len(maps.depth), "resolution": len(maps.depth[0])}
+
+    def _options(self, has_normals: bool) -> tuple[str, ...]:
+        maps = self.maps
+        return (f"-DPERSPECTIVE={int(maps.kind != 'orthographic')}", f"-DCUBE={int(maps.kind == 'cube')}",
+                f"-DRES={len(maps.depth[0])}", f"-DFILTER={FILTERS.index(self.filter)}",
+                f"-DPCF_K={self.pcf_size}", f"-DBIAS={BIASES.index(self.bias)}", f"-DNORMALS={int(has_normals)}",
+                f"-DDITHER={self.dither}")
+
+
+# Views --------------------------------------------------------------------------------------------
+
+
+def _choice(name: str, value, choices: tuple):
+    if value not in choices or isinstance(value, bool):
+        raise ValueError(f"{name}: expected one of {', '.join(map(repr, choices))}, got {value!r}")
+    return value
+
+
+def _check_fits(device, resolution: int) -> None:
+    """A clear error before drawing when one map does not fit in a device buffer."""
+    nbytes = 4 * resolution * resolution
+    if nbytes > device.max_alloc_bytes:
+        raise ValueError(f"resolution: a {resolution} x {resolution} depth map needs {nbytes / 2**20:.0f} MiB in one "
+                         f"buffer but {device.name} allows {device.max_alloc_bytes / 2**20:.0f} MiB; lower it")
+
+
+def _square(window: np.ndarray) -> np.ndarray:
+    """The window (u0, u1, v0, v1) widened about its centre to a square (square texels in a square map)."""
+    u0, u1, v0, v1 = window
+    half = 0.5 * max(u1 - u0, v1 - v0)
+    cu, cv = 0.5 * (u0 + u1), 0.5 * (v0 + v1)
+    return np.array([cu - half, cu + half, cv - half, cv + half])
+
+
+def _cube_near(mesh: Mesh, eye: np.ndarray, scale: float) -> float:
+    """The largest near plane that clips no occluder from any cube face of a light at ``eye`` (world).
+
+    A point at distance r from the eye lies at least r / sqrt(3) along its face's axis, and no
+    triangle is nearer than both its plane and its bounding box. The near plane matters for
+    precision: depth error is absolute (float32 interpolation of corner depths up to 1), so distance
+    error grows as distance / near.
+    """
+    triangles = mesh.triangles.astype(np.float64) - eye
+    normals = np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0])
+    length = np.linalg.norm(normals, axis=1)
+    plane = np.abs(np.einsum("ij,ij->i", normals, triangles[:, 0])) / np.where(length > 0, length, np.inf)
+    outside = np.maximum(np.maximum(triangles.min(axis=1), -triangles.max(axis=1)), 0.0)
+    nearest = np.maximum(plane, np.linalg.norm(outside, axis=1)).min(initial=scale)
+    return max(0.99 * nearest / math.sqrt(3), 1e-6 * scale)
+
+
+def _view(fitted: lightspace.LightViews, k: int, origin: np.ndarray, corners: np.ndarray, near: float | None,
+          scale: float, resolution: int) -> tuple[View, np.ndarray]:
+    """View ``k`` of ``fitted`` as a raster :class:`View` and the kernel's view record.
+
+    ``corners`` (relative to ``origin``) bound every occluder and receiver: they set the depth range,
+    and the near plane of a single perspective view; ``near`` is the cube's.
+    """
+    right, up, forward = fitted.axes[k]
+    u0, u1, v0, v1 = _square(fitted.windows[k])
+    size = u1 - u0
+    # Screen x = (2 u - (u0 + u1)) / size, likewise y, with u = p.right (orthographic) or
+    # u = d.right / d.forward (perspective, d from the eye); the rows below are that, times w.
+    matrix = np.zeros((4, 4))
+    if fitted.perspective:
+        eye = fitted.eye
+        if near is None:   # the box is in front of a single view: its nearest corner bounds every occluder
+            near = max(0.99 * float(((corners - eye) @ forward).min()), 1e-6 * scale)
+        far = math.inf
+        matrix[0, :3] = (2 * right - (u0 + u1) * forward) / size
+        matrix[1, :3] = (2 * up - (v0 + v1) * forward) / size
+        matrix[3, :3] = forward
+        matrix[:, 3] = -matrix[:, :3] @ eye
+        matrix[2, 3] = near                              # depth = near / distance
+    else:
+        t = corners @ forward
+        margin = 1e-3 * max(float(t.max() - t.min()), 1e-6 * scale)
+        near, far = float(t.min()) - margin, float(t.max()) + margin
+        matrix[0, :3], matrix[0, 3] = 2 * right / size, -(u0 + u1) / size
+        matrix[1, :3], matrix[1, 3] = 2 * up / size, -(v0 + v1) / size
+        matrix[2, :3], matrix[2, 3] = -forward / (far - near), far / (far - near)   # depth = (far - t) / (far - near)
+        matrix[3, 3] = 1.0
+    record = np.zeros(VIEW_FLOATS, dtype=np.float32)
+    record[:16] = matrix.ravel()
+    record[16:19] = size / resolution, near, min(far, np.finfo(np.float32).max)
+    return View(origin.copy(), matrix, resolution, resolution), record

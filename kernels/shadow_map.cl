@@ -1,0 +1,172 @@
+/* shadow_map.cl: Williams' (1978) shadow test of receivers against the light's depth map(s).
+ *
+ * The depth maps themselves are drawn by raster.cl (one rasterizer, two views); this file only
+ * transforms receivers into light space and compares. Conventions (host/shadowcl/views.py): clip =
+ * matrix * (relative position, 1); depth = z / w, 1 nearest (reversed Z), 0 empty; texel (row, col)
+ * samples screen ((col + 0.5), (row + 0.5)) with row 0 at the top.
+ *
+ * The host (host/shadowcl/shadow_map.py) specialises the kernel with -D:
+ *   PERSPECTIVE  1: views are perspective (depth = near / distance, the ray from the light's eye);
+ *                0: one orthographic view (depth = (far - distance) / (far - near), along the light)
+ *   CUBE         1: six square faces +x -x +y -y +z -z, a point uses the face of its dominant axis
+ *   RES          texels per side of every map
+ *   FILTER       0 nearest texel, 1 bilinear depth (Williams), 2 percentage-closer k x k
+ *   PCF_K        k of the percentage-closer filter (odd)
+ *   BIAS         0 constant, 1 slope-scaled, 2 normal offset (see bias_of)
+ *   NORMALS      1: normals are given (facing test, slope and offset use them)
+ *   DITHER       1: Williams' +-0.5 texel noise on the transformed coordinates
+ */
+
+#include "vecmath.h"
+
+#define VIEW_FLOATS 20 /* matrix (16, row-major), texel scale, near, far, unused */
+#define TAN_MAX 16.0f  /* slope bias is capped there: beyond ~86 degrees it would lift the shadow off */
+
+/* Lowbias32 (C. Wellons): a well-mixed 32-bit hash; reference/shadow_map.py repeats it bit for bit. */
+INLINE uint hash32(uint x)
+{
+    x ^= x >> 16;
+    x *= 0x7feb352du;
+    x ^= x >> 15;
+    x *= 0x846ca68bu;
+    x ^= x >> 16;
+    return x;
+}
+
+/* Uniform in [-0.5, 0.5) from 24 bits of a hash: exact in float32 on every device. */
+INLINE float centred_noise(const uint h)
+{
+    return (float)(h >> 8) * 0x1p-24f - 0.5f;
+}
+
+/* Distance along the view axis (perspective: from the eye; orthographic: from the view origin) of
+ * a map or receiver depth. Empty texels (depth 0) come out infinitely (perspective) or far-plane far. */
+INLINE float distance_of(const float depth, global const float *v)
+{
+#if PERSPECTIVE
+    return depth > 0.0f ? v[17] / depth : SC_BIG;
+#else
+    return v[18] - depth * (v[18] - v[17]);
+#endif
+}
+
+INLINE float map_depth(global const float *map, const int row, const int col)
+{
+    return map[clamp(row, 0, RES - 1) * RES + clamp(col, 0, RES - 1)];
+}
+
+/* Fraction of the filter's samples around texel coordinates (s, t) (texel centres at integers) whose
+ * stored surface is not nearer than the receiver at distance `reach` (its distance minus the bias). */
+INLINE float lit_fraction(global const float *map, global const float *v, const float s, const float t,
+                          const float reach)
+{
+#if FILTER == 1
+    /* Williams: interpolate the light's depths at the exact (s, t). Depth is affine in screen space
+     * over a plane (1 / distance in perspective), so a lit plane is reproduced exactly. */
+    const float s0 = SC_FLOOR(s), t0 = SC_FLOOR(t), fs = s - s0, ft = t - t0;
+    const int c = (int)s0, r = (int)t0;
+    const float top = map_depth(map, r, c) + fs * (map_depth(map, r, c + 1) - map_depth(map, r, c));
+    const float bottom = map_depth(map, r + 1, c) + fs * (map_depth(map, r + 1, c + 1) - map_depth(map, r + 1, c));
+    return distance_of(top + ft * (bottom - top), v) >= reach ? 1.0f : 0.0f;
+#else
+    const int c = (int)SC_FLOOR(s + 0.5f), r = (int)SC_FLOOR(t + 0.5f);
+#if FILTER == 0
+    return distance_of(map_depth(map, r, c), v) >= reach ? 1.0f : 0.0f;
+#else
+    int lit = 0;
+    for (int dr = -(PCF_K / 2); dr <= PCF_K / 2; ++dr)
+        for (int dc = -(PCF_K / 2); dc <= PCF_K / 2; ++dc)
+            lit += distance_of(map_depth(map, r + dr, c + dc), v) >= reach;
+    return (float)lit / (float)(PCF_K * PCF_K);
+#endif
+#endif
+}
+
+/* shadow_visibility: one work-item per receiver, n receivers.
+ * In:  points (3 floats each, relative to the maps' origin), normals (3 floats each, unit; read only
+ *      when NORMALS), to_light: the eye (PERSPECTIVE) or the unit direction towards the light;
+ *      views (VIEW_FLOATS per view), map0..map5 (RES x RES depths, row-major: view k's map is mapk;
+ *      a single view reads map0 only),
+ *      bias = (constant, slope / offset coefficient) in texels, seed of the dither.
+ * Out: visibility[i] in [0, 1]: the filtered fraction of the light's depth samples that do not
+ *      occlude receiver i; 0 for a normal facing away from the light (dot <= 0).
+ * Assumes every point projects in front of its view (inside the receiver bounds the views were
+ * fitted to); texel indices are clamped to the map, so a point off the map reads its edge. */
+kernel void shadow_visibility(global const float *points, global const float *normals, const float4 to_light,
+                              global const float *views, global const float *map0, global const float *map1,
+                              global const float *map2, global const float *map3, global const float *map4,
+                              global const float *map5, const float2 bias,
+                              const uint seed, const int n, global float *visibility)
+{
+    const int gid = get_global_id(0);
+    if (gid >= n)
+        return;
+    float px = points[3 * gid], py = points[3 * gid + 1], pz = points[3 * gid + 2];
+
+    /* Unit direction towards the light */
+#if PERSPECTIVE
+    float lx = to_light.x - px, ly = to_light.y - py, lz = to_light.z - pz;
+    const float dist = SC_SQRT(dot3(lx, ly, lz, lx, ly, lz));
+    lx /= dist, ly /= dist, lz /= dist;
+#else
+    const float lx = to_light.x, ly = to_light.y, lz = to_light.z;
+#endif
+
+    /* Pick the view */
+#if CUBE
+    const float ax = SC_ABS(px - to_light.x), ay = SC_ABS(py - to_light.y), az = SC_ABS(pz - to_light.z);
+    const int axis = ax >= ay && ax >= az ? 0 : (ay >= az ? 1 : 2);
+    const float along = axis == 0 ? px - to_light.x : (axis == 1 ? py - to_light.y : pz - to_light.z);
+    const int face = 2 * axis + (along < 0.0f);
+    global const float *v = views + VIEW_FLOATS * face;
+    global const float *map = face < 3 ? (face == 0 ? map0 : (face == 1 ? map1 : map2))
+                                       : (face == 3 ? map3 : (face == 4 ? map4 : map5));
+#else
+    global const float *v = views;
+    global const float *map = map0;
+#endif
+
+    /* Texel footprint T at the receiver, across the light's ray; the bias is in units of T */
+#if PERSPECTIVE
+    const float ex = px - to_light.x, ey = py - to_light.y, ez = pz - to_light.z;
+    const float w_axis = v[12] * px + v[13] * py + v[14] * pz + v[15];
+    const float texel = v[16] * dot3(ex, ey, ez, ex, ey, ez) / w_axis;
+#else
+    const float texel = v[16];
+#endif
+
+    /* Facing test and bias */
+    float offset = bias.x * texel; /* distance the receiver may lie behind the stored surface */
+#if NORMALS
+    const float nx = normals[3 * gid], ny = normals[3 * gid + 1], nz = normals[3 * gid + 2];
+    const float cosine = dot3(nx, ny, nz, lx, ly, lz);
+    if (cosine <= 0.0f) {
+        visibility[gid] = 0.0f;
+        return;
+    }
+    const float sine = SC_SQRT(SC_MAX(1.0f - cosine * cosine, 0.0f));
+#if BIAS == 1
+    offset += bias.y * texel * SC_MIN(sine / cosine, TAN_MAX);
+#elif BIAS == 2
+    /* Normal offset: lifting the point r T sin(theta) off its plane puts the plane r T tan(theta)
+     * behind it along the ray, what a lookup r texels away sees, without growing at grazing angles. */
+    const float lift = bias.y * texel * sine;
+    px += lift * nx, py += lift * ny, pz += lift * nz;
+#endif
+#endif
+
+    /* Transform into light space */
+    const float cx = v[0] * px + v[1] * py + v[2] * pz + v[3];
+    const float cy = v[4] * px + v[5] * py + v[6] * pz + v[7];
+    const float cz = v[8] * px + v[9] * py + v[10] * pz + v[11];
+    const float cw = v[12] * px + v[13] * py + v[14] * pz + v[15];
+    float s = (cx / cw + 1.0f) * (0.5f * RES) - 0.5f; /* texel coordinates, centres at integers */
+    float t = (1.0f - cy / cw) * (0.5f * RES) - 0.5f;
+#if DITHER
+    s += centred_noise(hash32(seed ^ hash32(2u * (uint)gid)));
+    t += centred_noise(hash32(seed ^ hash32(2u * (uint)gid + 1u)));
+#endif
+
+    /* Compare */
+    visibility[gid] = lit_fraction(map, v, s, t, distance_of(cz / cw, v) - offset);
+}

@@ -1,0 +1,278 @@
+"""Shadow maps (kernels/shadow_map.cl) against the float64 reference (reference/shadow_map.py) and the exact method.
+
+Tolerances:
+- Depth maps: the light's views are drawn by the raster kernel; they match reference/raster.py with
+  that file's contract: coverage exactly, depth to DEPTH_RTOL relative (float32 interpolation).
+- Visibility: the kernel transforms in float32, the reference in float64. A receiver whose answer
+  changes when its texel coordinates move by TEXEL_TOL texels or its distance by DISTANCE_RTOL (relative)
+  is a tie (float32 rounding may decide it either way); visibility must be equal everywhere else, and
+  ties are counted and bounded.
+- Against the exact method, a shadow map is wrong near shadow edges by construction: those tests
+  report the error (record_property) and bound it loosely; they do not hide leaks.
+"""
+
+import numpy as np
+import pytest
+
+import shadowcl as sc
+from shadowcl.exact import ExactMethod
+from shadowcl.methods import default_eps, shadow_mask
+from shadowcl.metrics import mask_error
+from shadowcl.reference import raster as raster_ref
+from shadowcl.reference import shadow_map as ref
+from shadowcl.shadow_map import ShadowMapMethod
+
+from test_exact import box, grid_plane, soup_mesh
+
+DEPTH_RTOL = 1e-5
+TEXEL_TOL = 2e-3        # float32 texel coordinates at RES <= 512: ~1e-4 texel of rounding, 20x margin
+DISTANCE_RTOL = 1e-5    # float32 distances and the depth's reciprocal: ~1e-7, 100x margin
+MAX_TIES = 0.01
+
+LIGHTS = {
+    "perspective": sc.PointLight((0.3, 4.0, 0.2)),
+    "cube": sc.PointLight((0.1, 0.2, 0.05)),
+    "orthographic": sc.DirectionalLight((0.2, -1.0, 0.3)),
+}
+
+
+def prepared(device, mesh, light, points, **params):
+    method = ShadowMapMethod(device, **params)
+    method.prepare(mesh, light, np.stack([points.min(0), points.max(0)]), default_eps(mesh.bounds))
+    return method
+
+
+def random_receivers(rng, n=4000):
+    points = rng.uniform(-1.2, 1.2, (n, 3))
+    normals = rng.normal(size=(n, 3))
+    return points, normals / np.linalg.norm(normals, axis=1, keepdims=True)
+
+
+def reference_visibility(method, points, normals, **perturbation):
+    maps = method.maps
+    return ref.visibility(points - maps.origin, normals, maps.kind, maps.to_light, maps.views, np.stack(maps.depth),
+                          method.bias_texels().astype(np.float64), method.bias, method.filter, method.pcf_size,
+                          method.dither, method.seed, **perturbation)
+
+
+def ties(method, points, normals):
+    """Receivers whose reference answer changes under rounding-sized perturbations."""
+    base = reference_visibility(method, points, normals)
+    moved = [reference_visibility(method, points, normals, perturb=p)
+             for p in ((TEXEL_TOL, 0, 0), (-TEXEL_TOL, 0, 0), (0, TEXEL_TOL, 0), (0, -TEXEL_TOL, 0),
+                       (0, 0, DISTANCE_RTOL), (0, 0, -DISTANCE_RTOL))]
+    return np.any([m != base for m in moved], axis=0)
+
+
+# Depth maps --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("light_name", list(LIGHTS))
+def test_depth_maps_match_the_reference_rasterizer(device, rng, light_name):
+    mesh = soup_mesh(rng, 60)
+    points, _ = random_receivers(rng, 500)
+    method = prepared(device, mesh, LIGHTS[light_name], points, resolution=64)
+    assert method.maps.kind == light_name
+    assert len(method.maps.depth) == (6 if light_name == "cube" else 1)
+    for k, (depth, view) in enumerate(zip(method.maps.depth, method.maps.raster_views)):
+        expected = raster_ref.rasterize(mesh, view)
+        assert depth.shape == (64, 64) and depth.dtype == np.float32
+        covered = expected.triangle >= 0
+        assert np.array_equal(depth > 0, covered & (expected.depth > 0)), f"{light_name} view {k}: coverage"
+        # at a depth tie (two fragments within rounding) the kernel may keep the runner-up: its depth
+        tied = expected.margin <= DEPTH_RTOL * expected.depth
+        error = np.abs(depth - expected.depth)[~tied]
+        assert np.all(error <= DEPTH_RTOL * expected.depth[~tied]), f"{light_name} view {k}: max {error.max():.3g}"
+        assert tied.sum() <= 0.01 * covered.sum(), f"{light_name} view {k}: {int(tied.sum())} tied texels"
+    assert sum(int((d > 0).sum()) for d in method.maps.depth) > 0
+
+
+# Shadow test against the reference ------------------------------------------------------------------
+
+SETTINGS = [dict(filter=f, bias=b) for f in ("nearest", "bilinear", "pcf") for b in ("constant", "slope", "normal")]
+SETTINGS += [dict(filter="nearest", dither=1, seed=7), dict(filter="pcf", pcf_size=5, dither=1)]
+
+
+@pytest.mark.parametrize("light_name", list(LIGHTS))
+@pytest.mark.parametrize("params", SETTINGS, ids=lambda p: "-".join(f"{k}={v}" for k, v in p.items()))
+def test_visibility_matches_reference(device, rng, light_name, params):
+    mesh = soup_mesh(rng, 80)
+    points, normals = random_receivers(rng)
+    method = prepared(device, mesh, LIGHTS[light_name], points, resolution=128, **params)
+    for n in (normals, None):
+        got = method.visibility(points, n)
+        assert got.shape == (len(points),) and got.dtype == np.float32
+        expected = reference_visibility(method, points, n)
+        tied = ties(method, points, n)
+        wrong = np.flatnonzero((np.abs(got - expected) > 1e-6) & ~tied)
+        assert len(wrong) == 0, (f"{light_name} {params}: {len(wrong)} receivers differ away from ties, first "
+                                 f"{points[wrong[0]].tolist()}: kernel {got[wrong[0]]}, reference {expected[wrong[0]]}")
+        assert tied.mean() <= MAX_TIES, f"{light_name} {params}: {int(tied.sum())} ties"
+        assert np.array_equal(method.classify(points, n), got < 0.5)
+        assert 0.02 < (got < 0.5).mean() < 0.98, "the scene should have both lit and shadowed receivers"
+
+
+# Hard cases -------------------------------------------------------------------------------------
+
+
+def exact_mask(device, mesh, light, points, normals):
+    method = ExactMethod(device)
+    method.prepare(mesh, light, np.stack([points.min(0), points.max(0)]), default_eps(mesh.bounds))
+    return method.classify(points, normals)
+
+
+# Lowest light elevation (degrees above the plane) each setting keeps a lit plane clean at, at its
+# default bias: the normal offset has no limit; the slope bias is capped at tan = 16 and a nearest
+# texel sits up to 0.71 texel away; the constant bias covers tan <= 2 (elevation >= 27 degrees).
+GRAZING_LIMITS = {("normal", f): 0.0 for f in ("nearest", "bilinear", "pcf")}
+GRAZING_LIMITS.update({("slope", "nearest"): 5.0, ("slope", "bilinear"): 1.0, ("slope", "pcf"): 1.0,
+                       ("constant", "nearest"): 27.0, ("constant", "bilinear"): 1.0, ("constant", "pcf"): 27.0})
+
+
+# Only the elevations each setting is documented to handle clean (GRAZING_LIMITS) are cases.
+GRAZING_CASES = [(bias, filter, elevation) for (bias, filter), limit in GRAZING_LIMITS.items()
+                 for elevation in (0.5, 3.0, 30.0) if elevation >= limit]
+
+
+@pytest.mark.parametrize("bias, filter, elevation_degrees", GRAZING_CASES, ids=lambda v: str(v))
+def test_grazing_light_on_a_lit_plane_casts_no_self_shadow(device, rng, elevation_degrees, bias, filter):
+    """Williams' Figure 1: a lit plane under a grazing light must not shadow itself at the default bias
+    (the default setting is normal offset + bilinear), down to the limit of each setting."""
+    plane = grid_plane(20, 1.0)
+    points = np.column_stack([rng.uniform(-0.95, 0.95, 5000), np.zeros(5000), rng.uniform(-0.95, 0.95, 5000)])
+    normals = np.tile([0.0, 1.0, 0.0], (len(points), 1))
+    e = np.radians(elevation_degrees)
+    for light in (sc.DirectionalLight((np.cos(e), -np.sin(e), 0.1)), sc.PointLight((-3.0, 3.0 * np.tan(e), 0.2))):
+        method = prepared(device, plane, light, points, resolution=512, bias=bias, filter=filter)
+        mask = method.classify(points, normals)
+        assert not mask.any(), f"{light}: {int(mask.sum())} self-shadowed points"
+
+
+SCENES = {
+    # a box resting on the floor: peter-panning shows as light leaking under the box's edges
+    "contact": (lambda: sc.Mesh.concatenate([grid_plane(4, 3.0), box((-0.5, 0.0, -0.5), (0.5, 1.0, 0.5))]),
+                sc.PointLight((2.0, 3.0, 1.0))),
+    # a two-sided sheet 1e-6 thick, far thinner than a texel, floating above the floor
+    "thin": (lambda: sc.Mesh.concatenate([grid_plane(2, 0.3, y=0.5),
+                                          sc.Mesh(grid_plane(2, 0.3, y=0.5 - 1e-6).vertices, grid_plane(2, 0.3).faces[:, ::-1]),
+                                          grid_plane(4, 1.5, y=0.0)]),
+             sc.PointLight((0.1, 2.0, 0.0))),
+}
+
+
+@pytest.mark.parametrize("scene_name", list(SCENES))
+@pytest.mark.parametrize("resolution", [256, 1024])
+def test_leaks_are_reported_against_exact(device, rng, scene_name, resolution, record_property):
+    build, light = SCENES[scene_name]
+    mesh = build()
+    xz = rng.uniform(-1.2, 1.2, (20000, 2))
+    points = np.column_stack([xz[:, 0], np.zeros(len(xz)), xz[:, 1]])
+    normals = np.tile([0.0, 1.0, 0.0], (len(points), 1))
+    truth = exact_mask(device, mesh, light, points, normals)
+    error = mask_error(prepared(device, mesh, light, points, resolution=resolution).classify(points, normals), truth)
+    record_property("error", error.as_dict())
+    print(f"{scene_name} at {resolution}: {error}")
+    # Errors live along shadow edges: a band of about a texel. Bounded loosely; the figure is recorded.
+    assert error.fraction < 0.02, f"{scene_name} at {resolution}: {error}"
+    assert error.false_light <= 0.01 * truth.sum(), f"{scene_name} at {resolution}: light leaks: {error}"
+
+
+def test_error_falls_as_resolution_rises(device, rng):
+    build, light = SCENES["contact"]
+    mesh = build()
+    points, normals = random_receivers(rng, 20000)
+    points *= [1.0, 0.0, 1.0]
+    normals = np.tile([0.0, 1.0, 0.0], (len(points), 1))
+    truth = exact_mask(device, mesh, light, points, normals)
+    errors = [mask_error(prepared(device, mesh, light, points, resolution=r).classify(points, normals), truth).wrong
+              for r in (128, 512, 2048)]
+    assert errors[0] > errors[1] > errors[2], errors
+
+
+def test_dither_is_reproducible_with_a_seed(device, rng):
+    mesh = soup_mesh(rng, 80)
+    points, normals = random_receivers(rng)
+    light = LIGHTS["perspective"]
+
+    def run(seed):
+        return prepared(device, mesh, light, points, resolution=64, filter="nearest", dither=1, seed=seed).visibility(points, normals)
+
+    assert np.array_equal(run(3), run(3))
+    assert not np.array_equal(run(3), run(4))
+    plain = prepared(device, mesh, light, points, resolution=64, filter="nearest").visibility(points, normals)
+    assert not np.array_equal(run(3), plain)
+
+
+def test_shadow_mask_api_and_methods_listing(device, rng):
+    mesh = soup_mesh(rng, 80)
+    points, normals = random_receivers(rng, 2000)
+    mask = shadow_mask(mesh, LIGHTS["perspective"], points, normals, method="shadow_map", device=device, resolution=256)
+    assert mask.dtype == bool and mask.shape == (2000,)
+    facing_away = np.einsum("ij,ij->i", normals, LIGHTS["perspective"].direction_to_light(points)) <= 0
+    assert mask[facing_away].all()
+    listed = sc.methods()["shadow_map"]
+    assert set(listed) == set(ShadowMapMethod.parameters)
+    assert (listed["bias"][0], listed["filter"][0], listed["resolution"][0]) == ("normal", "bilinear", None)
+
+
+# Bad input ----------------------------------------------------------------------------------------
+
+BAD_PARAMS = [
+    (dict(resolution=0), ValueError, "resolution"),
+    (dict(resolution=1.5), TypeError, "resolution"),
+    (dict(bias="huge"), ValueError, "bias"),
+    (dict(filter="gauss"), ValueError, "filter"),
+    (dict(pcf_size=4), ValueError, "pcf_size"),
+    (dict(bias_scale=-1), ValueError, "bias_scale"),
+    (dict(dither=2), ValueError, "dither"),
+    (dict(seed=-1), ValueError, "seed"),
+]
+
+
+@pytest.mark.parametrize("params, error, message", BAD_PARAMS, ids=[str(p) for p, _, _ in BAD_PARAMS])
+def test_bad_parameters_are_named(device, params, error, message):
+    with pytest.raises(error, match=message):
+        ShadowMapMethod(device, **params)
+
+
+def test_a_resolution_the_device_cannot_hold_is_a_clear_error(device, rng):
+    mesh = soup_mesh(rng, 10)
+    points, _ = random_receivers(rng, 10)
+    side = int(np.sqrt(device.max_alloc_bytes / 4)) + 1
+    with pytest.raises(ValueError, match="resolution: a .* depth map needs .* MiB"):
+        prepared(device, mesh, LIGHTS["perspective"], points, resolution=side)
+
+
+def test_classify_before_prepare_is_an_error(device):
+    with pytest.raises(RuntimeError, match="prepare"):
+        ShadowMapMethod(device).classify(np.zeros((1, 3)), None)
+
+
+# render: fractional visibility and Williams' post-filter ----------------------------------------------
+
+
+def test_render_shades_with_fractional_visibility_and_post_filter(device):
+    from types import SimpleNamespace
+
+    from conftest import SCENES
+    from shadowcl.render import _box_filter, render_report
+
+    scene = sc.Scene.load(SCENES / "default.toml")
+    result = render_report(scene, "shadow_map", width=96, height=54, device=device, filter="pcf", resolution=256)
+    assert result.image.shape == (54, 96, 3)
+    assert np.array_equal(result.shadow, result.visibility < 0.5)
+    assert np.any((result.visibility > 0) & (result.visibility < 1)), "pcf should give penumbra-like fractions"
+    filtered = render_report(scene, "shadow_map", width=96, height=54, device=device, post_filter=2, resolution=256)
+    assert filtered.visibility.dtype == np.float32
+    assert np.any((filtered.visibility > 0) & (filtered.visibility < 1)), "the post-filter should blur shadow edges"
+
+    # the filter averages over covered pixels only (brute force on a small image)
+    mask = np.zeros((5, 6), bool)
+    mask[1:4, 1:5] = True
+    seen = SimpleNamespace(mask=mask, pixel_index=np.flatnonzero(mask))
+    values = np.arange(mask.sum(), dtype=np.float64)
+    image = np.zeros(mask.shape)
+    image.ravel()[seen.pixel_index] = values
+    windows = [(slice(max(r - 1, 0), r + 2), slice(max(c - 1, 0), c + 2)) for r, c in zip(*np.nonzero(mask))]
+    expected = [image[w][mask[w]].mean() for w in windows]
+    np.testing.assert_allclose(_box_filter(seen, values, 1), expected, rtol=1e-6)  # float32 result
