@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 import shadowcl as sc
+from shadowcl.hard_cases import aimed_receivers, icosphere
 from shadowcl.exact import ExactMethod
 from shadowcl.methods import default_eps, shadow_mask
 from shadowcl.reference import exact as ref
@@ -132,34 +133,6 @@ def test_linked_list_overflow_gives_the_same_mask(device):
 
 
 # Watertightness: rays through shared edges and vertices of a closed mesh ------------------------------
-def icosphere(subdivisions):
-    import trimesh
-    ico = trimesh.creation.icosphere(subdivisions=subdivisions)
-    return sc.Mesh(ico.vertices, ico.faces)
-
-
-def aimed_receivers(mesh, towards_light, per_edge, rng, light_position=None):
-    """Receivers inside a closed convex mesh whose segment to the light passes through edge points and
-    vertices computed in float32 (on the cap facing the light), so it crosses the surface exactly once."""
-    V = mesh.vertices
-    f = mesh.faces
-    edges = np.unique(np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1), axis=0)
-    lam = rng.random((len(edges), per_edge)).astype(np.float32)
-    lam[:, 0] = 0.5
-    on_edges = V[edges[:, 0]][:, None] + lam[..., None] * (V[edges[:, 1]] - V[edges[:, 0]])[:, None]
-    targets = np.concatenate([on_edges.reshape(-1, 3), V]).astype(np.float64)   # float32 values
-    centre = V.astype(np.float64).mean(0)
-    radius = float(np.linalg.norm(V - centre, axis=1).mean())
-    if light_position is not None:
-        u = light_position - targets
-        u /= np.linalg.norm(u, axis=1, keepdims=True)
-    else:
-        u = np.broadcast_to(towards_light, targets.shape)
-    outward = (targets - centre) / np.linalg.norm(targets - centre, axis=1, keepdims=True)
-    facing = np.einsum("ij,ij->i", outward, u) > 0.3
-    return targets[facing] - 0.25 * radius * u[facing]       # inside, behind the aimed point
-
-
 @pytest.mark.parametrize("light", [sc.PointLight((0.3, 3.0, 0.2)), sc.PointLight((0.02, 1.3, 0.01)),
                                    sc.DirectionalLight((0.2, -1.0, 0.1))], ids=["point", "point-close", "directional"])
 def test_no_leaks_through_shared_edges_and_vertices(device, rng, light, record_property):
