@@ -150,8 +150,18 @@ def _shade(scene, view, seen, visibility: np.ndarray) -> np.ndarray:
     return to_srgb8(image)
 
 
-def to_srgb8(linear: np.ndarray) -> np.ndarray:
-    """Linear [0, 1] colours to 8-bit sRGB."""
-    c = np.clip(linear, 0.0, 1.0)
+def _srgb8_table(levels: int = 1 << 14) -> np.ndarray:
+    c = np.linspace(0.0, 1.0, levels)
     srgb = np.where(c <= 0.0031308, 12.92 * c, 1.055 * np.power(c, 1 / 2.4) - 0.055)
     return np.round(srgb * 255).astype(np.uint8)
+
+
+# Linear -> sRGB through a table: a pow per pixel cost ~0.1 s at 1280 x 720. 2^14 levels keep every
+# 8-bit code within one of the exact conversion (the steepest slope, 12.92 * 255, is 0.2 code a level).
+_SRGB8 = _srgb8_table()
+
+
+def to_srgb8(linear: np.ndarray) -> np.ndarray:
+    """Linear [0, 1] colours to 8-bit sRGB."""
+    index = np.clip(linear, 0.0, 1.0) * (len(_SRGB8) - 1) + 0.5
+    return _SRGB8[index.astype(np.intp)]
