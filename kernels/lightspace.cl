@@ -394,7 +394,7 @@ __kernel void ls_fill_linked(__global const float *prims, int nprims, __constant
         return;
     LS_FOR_EACH_CELL(prims, p, views, {
         const int node = atomic_inc(counter);
-        if (node < capacity) {
+        if ((uint)node < (uint)capacity) {     /* unsigned: a counter wrapped past 2^31 never writes */
             nodes[2 * node] = p;
             nodes[2 * node + 1] = atomic_xchg(heads + cell, node);
         }

@@ -431,3 +431,14 @@ def test_agrees_with_embree_on_the_bunny(device):
           f"({int((mask & ~embree).sum())} exact-only shadow); {mask.mean():.3f} in shadow")
     # Differences can only come from rays within float32 rounding of an edge or of the eps ends
     assert differ <= 2e-5 * len(points)
+
+
+def test_one_far_receiver_does_not_cost_the_others_precision(device, rng):
+    """The local frame is the occluders' centre: a receiver 1e8 away must not move it (a frame at the
+    centre of all receivers rounded the occluders to float32 spacing 8 there and changed ~700 answers)."""
+    mesh = soup_mesh(rng, 200, 0.15)
+    points = rng.uniform(-1.2, 1.2, (3000, 3))
+    light = sc.PointLight((0.3, 3.0, 0.2))
+    alone = shadow_mask(mesh, light, points, device=device)
+    with_far = shadow_mask(mesh, light, np.vstack([points, [[1e8, 0.0, 0.0]]]), device=device)
+    assert np.array_equal(alone, with_far[:-1])

@@ -38,6 +38,10 @@ BAD_INPUTS = [
     (lambda: shadow_mask("mesh", LIGHT, np.zeros((2, 3))), TypeError, r"scene_or_mesh: expected a Mesh or a Scene"),
     (lambda: shadow_mask(MESH, LIGHT, np.zeros((2, 3)), method="nope"), ValueError, r"method: unknown method 'nope'"),
     (lambda: shadow_mask(MESH, LIGHT, np.zeros((2, 3)), eps=-1.0), ValueError, r"eps: must be a finite non-negative"),
+    (lambda: shadow_mask(MESH, LIGHT, np.zeros((2, 3)), eps="a"), TypeError, r"eps: expected a number"),
+    (lambda: shadow_mask(MESH, LIGHT, np.zeros((2, 3)), eps=[1e-3]), TypeError, r"eps: expected a number"),
+    (lambda: shadow_mask(MESH, LIGHT, [[1e39, 0, 0]]), ValueError, r"points: coordinates overflow float32"),
+    (lambda: sc.render(MESH), TypeError, r"scene: expected a shadowcl.Scene"),
     (lambda: sc.Mesh.load("model.xyz"), ValueError, r"path: unsupported mesh format '.xyz'"),
     (lambda: sc.Mesh.load("/no/such/model.obj"), FileNotFoundError, r"path: no mesh file at /no/such/model.obj"),
 ]

@@ -22,6 +22,8 @@ def finite_array(name: str, value, shape_tail: tuple[int, ...], dtype=np.float64
     if not np.all(np.isfinite(array)):
         bad = np.argwhere(~np.isfinite(array))[0]
         raise ValueError(f"{name}: contains NaN or inf (first at index {tuple(int(i) for i in bad)})")
+    if array.size and np.abs(array).max() >= np.finfo(np.float32).max:
+        raise ValueError(f"{name}: coordinates overflow float32 (largest magnitude {np.abs(array).max():.3g})")
     return array
 
 
@@ -47,6 +49,15 @@ def positive_int(name: str, value, minimum: int = 1, maximum: int | None = None)
         bound = f"between {minimum} and {maximum}" if maximum is not None else f"at least {minimum}"
         raise ValueError(f"{name}: must be {bound}, got {value}")
     return int(value)
+
+
+def non_negative_float(name: str, value) -> float:
+    """``value`` as a finite float >= 0 (numbers only: strings are refused, not parsed)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{name}: expected a number, got {type(value).__name__}")
+    if not (np.isfinite(value) and value >= 0):
+        raise ValueError(f"{name}: must be a finite non-negative number, got {value!r}")
+    return float(value)
 
 
 def positive_float(name: str, value) -> float:

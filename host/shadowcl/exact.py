@@ -156,9 +156,10 @@ class ExactMethod:
             raise ValueError(f"eps: must be a finite non-negative distance, got {eps!r}")
         dev = self.device
         t0 = time.perf_counter()
-        # Local frame: the centre of everything, in float64
+        # Local frame: the centre of the occluders, in float64. Not of the receivers too: one receiver far
+        # away would move the frame and cost the occluders their float32 precision.
         union = np.stack([np.minimum(mesh.bounds[0], box[0]), np.maximum(mesh.bounds[1], box[1])])
-        origin = 0.5 * (union[0] + union[1])
+        origin = 0.5 * (mesh.bounds[0] + mesh.bounds[1])
         scale = bounds_diagonal(union)
         vertices = (mesh.vertices.astype(np.float64) - origin).astype(np.float32)
         ntris = len(mesh.faces)

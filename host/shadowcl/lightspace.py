@@ -363,7 +363,7 @@ class ListBuilder:
             raise ValueError(f"corners: primitives have 3 or 4 corners, got {corners}")
         self.device = device
         self.corners = corners
-        self._counts = None       # (cells,) int, all zero between builds
+        self._counts = None       # (cells,) int, reused between builds of the same size
         self._counts_cells = 0
 
     def _kernel(self, grid: Grid, name: str):
@@ -386,7 +386,9 @@ class ListBuilder:
             if self._counts is None or self._counts_cells != cells:
                 self._counts = dev.empty(4 * cells, "light-space cell counts")
                 self._counts_cells = cells
-                cl.enqueue_fill_buffer(queue, self._counts, np.int32(0), 0, 4 * cells)
+            # Zeroed on every build, not trusted to the previous fill: a build interrupted between count
+            # and fill would leave slots that the next fill writes past their cell.
+            cl.enqueue_fill_buffer(queue, self._counts, np.int32(0), 0, 4 * cells)
             records = dev.empty(16 * max(nprims, 1), "light-space count records")
             self._kernel(grid, "ls_count")(queue, gsize, None, prims, np.int32(nprims), params, self._counts, records)
             queue.finish()
@@ -396,7 +398,6 @@ class ListBuilder:
             t2 = time.perf_counter()
             limit = min(dev.max_alloc_bytes // 4, 2**31 - 1)
             if total > limit:
-                self._counts = None          # the fill never ran: counts are not zero any more
                 raise ValueError(f"resolution: the lists need {total} entries, more than {dev.name} holds in one "
                                  f"buffer ({limit}); lower the resolution")
             items = dev.empty(4 * max(total, 1), "light-space lists")

@@ -23,7 +23,7 @@ import importlib
 
 import numpy as np
 
-from .checks import finite_array
+from .checks import finite_array, non_negative_float
 from .device import get_device
 from .geometry import Mesh, bounds_diagonal
 from .lights import check_light
@@ -58,6 +58,14 @@ def create_method(name: str, device=None, **params):
     if unknown:
         raise TypeError(f"{', '.join(unknown)}: not a parameter of method {name!r}; it takes {sorted(cls.parameters)}")
     return cls(get_device(device), **params)
+
+
+def with_receiver_count(name: str, params: dict, count: int) -> dict:
+    """``params`` plus ``expected_receivers=count`` when method ``name`` sizes its grid by it and the caller
+    did not say: the one-shot calls know how many receivers are coming before they prepare."""
+    if "expected_receivers" in method_class(name).parameters and params.get("expected_receivers") is None:
+        return {**params, "expected_receivers": max(int(count), 1)}
+    return params
 
 
 def as_mesh(scene_or_mesh) -> Mesh:
@@ -99,13 +107,10 @@ def shadow_mask(scene_or_mesh, light, points, normals=None, method: str = "exact
     light = check_light(light)
     points, normals = check_points(points, normals)
     bounds = mesh.bounds
-    if eps is None:
-        eps = default_eps(bounds)
-    elif not (np.isfinite(eps) and eps >= 0):
-        raise ValueError(f"eps: must be a finite non-negative distance, got {eps!r}")
-    instance = create_method(method, device, **params)
+    eps = default_eps(bounds) if eps is None else non_negative_float("eps", eps)
+    instance = create_method(method, device, **with_receiver_count(method, params, len(points)))
     if len(points) == 0:
         return np.zeros(0, dtype=bool)
     receiver_bounds = np.stack([points.min(axis=0), points.max(axis=0)])
-    instance.prepare(mesh, light, receiver_bounds, float(eps))
+    instance.prepare(mesh, light, receiver_bounds, eps)
     return instance.classify(points, normals)

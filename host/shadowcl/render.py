@@ -16,10 +16,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import raster
-from .checks import positive_int
+from .checks import non_negative_float, positive_int
 from .device import get_device
 from .geometry import bounds_diagonal
-from .methods import create_method, default_eps
+from .methods import create_method, default_eps, with_receiver_count
+from .scene import Scene
 
 AMBIENT = 0.18
 BACKGROUND_TOP = np.array([0.60, 0.70, 0.85])
@@ -76,12 +77,14 @@ def render_report(scene, method: str = "exact", width=None, height=None, device=
     (pixels) box-filters each light's visibility over a (2k + 1)^2 window of covered pixels before
     shading; ``shadow`` stays the method's own mask.
     """
+    if not isinstance(scene, Scene):
+        raise TypeError(f"scene: expected a shadowcl.Scene, got {type(scene).__name__}")
     post_filter = positive_int("post_filter", post_filter, minimum=0, maximum=MAX_SIDE)
     device = get_device(device)
     width, height = render_size(scene, width, height)
     timings: dict[str, float] = {}
     mesh = scene.mesh
-    eps = default_eps(scene.bounds) if eps is None else eps
+    eps = default_eps(scene.bounds) if eps is None else non_negative_float("eps", eps)
     view = camera_view(scene, width, height)
     def stage(name):
         return _timed(timings, name, progress)
@@ -93,7 +96,7 @@ def render_report(scene, method: str = "exact", width=None, height=None, device=
     shadow = np.zeros((len(scene.lights), len(seen.points)), dtype=bool)
     visibility = np.ones(shadow.shape, dtype=np.float32)
     for index, light in enumerate(scene.lights):
-        shadower = create_method(method, device, **params)
+        shadower = create_method(method, device, **with_receiver_count(method, params, len(seen.points)))
         with stage("prepare"):
             shadower.prepare(mesh, light, scene.bounds, eps)
         with stage("classify"):
@@ -163,5 +166,5 @@ _SRGB8 = _srgb8_table()
 
 def to_srgb8(linear: np.ndarray) -> np.ndarray:
     """Linear [0, 1] colours to 8-bit sRGB."""
-    index = np.clip(linear, 0.0, 1.0) * (len(_SRGB8) - 1) + 0.5
+    index = np.clip(np.nan_to_num(linear), 0.0, 1.0) * (len(_SRGB8) - 1) + 0.5
     return _SRGB8[index.astype(np.intp)]
