@@ -11,6 +11,8 @@ import functools
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import shadowcl as sc
 from shadowcl.hard_cases import aimed_receivers, icosphere
@@ -330,8 +332,7 @@ def test_shadow_mask_api_and_stats(device, rng):
     points = rng.uniform(-1.5, 1.5, (3000, 3))
     light = sc.PointLight((0.3, 4.0, 0.2))
     mask = shadow_mask(mesh, light, points, device=device)
-    truth = ref.shadow_mask(mesh.vertices, mesh.faces, light, points, None, default_eps(mesh.bounds))
-    assert (mask != truth).sum() <= 3
+    check_against_reference(mask, mesh, light, points, None, default_eps(mesh.bounds), "shadow_mask")
     method = ExactMethod(device, expected_receivers=len(points))
     method.prepare(mesh, light, np.stack([points.min(0), points.max(0)]), 1e-4)
     method.classify(points)
@@ -442,3 +443,20 @@ def test_one_far_receiver_does_not_cost_the_others_precision(device, rng):
     alone = shadow_mask(mesh, light, points, device=device)
     with_far = shadow_mask(mesh, light, np.vstack([points, [[1e8, 0.0, 0.0]]]), device=device)
     assert np.array_equal(alone, with_far[:-1])
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), triangles=st.integers(1, 40), receivers=st.integers(1, 300),
+       light_height=st.floats(-2.0, 3.0), directional=st.booleans())
+def test_property_random_small_scenes_match_reference(device, seed, triangles, receivers, light_height, directional):
+    """Any small soup, any receivers, a light anywhere (inside the receivers too): the reference's answer
+    everywhere outside the float32 band around edges."""
+    rng = np.random.default_rng(seed)
+    mesh = soup_mesh(rng, triangles, 0.3)
+    points = rng.uniform(-1.5, 1.5, (receivers, 3))
+    light = (sc.DirectionalLight((0.3, -1.0, 0.2)) if directional
+             else sc.PointLight((0.2, light_height, 0.1)))
+    mask, _ = classify(mesh, light, points, device=device)
+    # No bound on how many fall in the band: with a handful of receivers one is already a large share
+    # (the random-scene tests above bound it); what must hold is that no decided receiver differs.
+    check_against_reference(mask, mesh, light, points, None, default_eps(mesh.bounds), "property", max_undecided=1.0)
