@@ -110,6 +110,8 @@ class Device:
     ``Device()`` picks, in order: ``SHADOWCL_DEVICE`` or ``PYOPENCL_CTX`` (``"P:D"`` indices or a
     name substring), else the first CPU device, else any device. ``Device("pthread")`` or
     ``Device(cl_device)`` picks explicitly. ``kernel_dir`` replaces the shipped kernels folder (tests).
+    Kernel objects are shared and carry their arguments, so use one Device from one thread at a time
+    (builds are locked; launches are not).
     """
 
     def __init__(self, device: "str | cl.Device | None" = None, kernel_dir: "Path | None" = None):
@@ -132,10 +134,12 @@ class Device:
 
     @property
     def name(self) -> str:
+        """The OpenCL device's name."""
         return self.cl_device.name
 
     @property
     def max_alloc_bytes(self) -> int:
+        """The largest single buffer the device allows (PoCL's figure follows the machine's free memory)."""
         return int(self.cl_device.max_mem_alloc_size)
 
     def program(self, filename: str, options: "tuple[str, ...] | list[str]" = ()) -> cl.Program:
@@ -155,8 +159,9 @@ class Device:
         key = (filename, options, name)
         kernel = self._kernels.get(key)
         if kernel is None:
-            kernel = cl.Kernel(self.program(filename, options), name)
-            self._kernels[key] = kernel
+            program = self.program(filename, options)
+            with self._lock:
+                kernel = self._kernels.setdefault(key, cl.Kernel(program, name))
         return kernel
 
     def _build(self, filename: str, options: tuple[str, ...]) -> cl.Program:
@@ -189,6 +194,7 @@ class Device:
         return cl.Buffer(self.context, cl.mem_flags.READ_WRITE, nbytes)
 
     def from_device(self, buffer: cl.Buffer, shape, dtype) -> np.ndarray:
+        """A new host array of ``shape`` and ``dtype`` copied from the start of ``buffer`` (blocking)."""
         out = np.empty(shape, dtype=dtype)
         if out.nbytes:
             cl.enqueue_copy(self.queue, out, buffer)

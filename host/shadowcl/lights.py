@@ -34,6 +34,7 @@ class DirectionalLight:
         object.__setattr__(self, "direction", d / np.linalg.norm(d))
 
     def direction_to_light(self, points: np.ndarray) -> np.ndarray:
+        """(N, 3) unit vectors from ``points`` towards the light (the same for every point)."""
         return np.broadcast_to(-self.direction, np.shape(points)).copy()
 
 

@@ -17,6 +17,7 @@ class MaskError:
 
     @property
     def wrong(self) -> int:
+        """Misclassified receivers: false shadow plus false light."""
         return self.false_shadow + self.false_light
 
     @property
@@ -25,6 +26,7 @@ class MaskError:
         return self.wrong / self.receivers if self.receivers else 0.0
 
     def as_dict(self) -> dict:
+        """The counts with ``wrong`` and ``percent``, for JSON rows."""
         return {**asdict(self), "wrong": self.wrong, "percent": 100.0 * self.fraction}
 
     def __str__(self) -> str:
