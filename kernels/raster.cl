@@ -424,12 +424,17 @@ kernel void raster_receivers(global const int *pixel, global const uint *triangl
     /* Its triangle's plane */
     global const int *face = faces + 3 * triangle[p];
     const float3 v0 = load3(vertices + 3 * face[0]);
-    const float3 normal = vunit(vcross(load3(vertices + 3 * face[1]) - v0, load3(vertices + 3 * face[2]) - v0));
+    const float3 cross = vcross(load3(vertices + 3 * face[1]) - v0, load3(vertices + 3 * face[2]) - v0);
+    const float area2 = vdot(cross, cross);
+    /* A sliver can be drawn (its snapped screen corners span pixels) while its float32 cross product
+     * is zero or underflows: it has no plane, so it faces the viewer and keeps its stored depth. */
+    const bool has_plane = area2 > 0.0f && area2 <= FLT_MAX;
+    const float3 normal = has_plane ? cross * (1.0f / SC_SQRT(area2)) : -direction;
     const float facing = vdot(normal, direction);
 
     /* Intersect, or fall back on the stored depth */
     const float t = vdot(normal, v0 - start) / facing;
-    const bool finite = SC_ABS(t) <= FLT_MAX; /* false for inf and NaN */
+    const bool finite = has_plane && SC_ABS(t) <= FLT_MAX; /* false for inf and NaN */
     store3(finite ? start + t * direction : unproject(inverse, x, y, as_float(depth_bits[p])), points + 3 * gid);
     store3(facing > 0.0f ? -normal : normal, normals + 3 * gid);
 }

@@ -87,3 +87,19 @@ def test_far_offset_scene_renders_like_the_default(device):
     near_shadow[near.covered] = near.shadow[0]
     far_shadow[far.covered] = far.shadow[0]
     assert (near_shadow != far_shadow)[both].mean() < 0.005
+
+
+def test_slivers_get_finite_normals_and_render(device, rng):
+    """Collinear triangles (0, b, b / 2 on a dyadic grid, the camera too, so the corners relative to it
+    are exact and their float32 cross product is exactly zero) can still cover pixels once their
+    projected corners are snapped to the sub-pixel grid; their receivers must get a finite unit normal,
+    not NaN (which broke render)."""
+    n = 20000
+    b = rng.integers(-1024, 1024, (n, 3)) / 1024.0
+    corners = np.stack([np.zeros_like(b), b, b * np.float32(0.5)], axis=1)
+    slivers = sc.Mesh(corners.reshape(-1, 3), np.arange(3 * n).reshape(-1, 3))
+    scene = sc.Scene([("slivers", slivers)], [sc.PointLight((0, 3, 0))], sc.Camera((0.25, 0.125, 1.5), (0, 0, 0)))
+    result = render_report(scene, width=256, height=256, device=device)
+    normals = result.receivers.normals
+    assert result.covered.any()
+    np.testing.assert_allclose(np.linalg.norm(normals, axis=1), 1.0, atol=1e-5)
