@@ -199,7 +199,8 @@ class ExactMethod:
         device_bytes = sum(b.size for b in (tris_dev, records, *lists.buffers(), lists.params) if b is not None)
         self.stats.update(
             triangles=ntris, lists=self.lists_kind, test=self.test, device_bytes=int(device_bytes),
-            mean_list=lists.entries / grid.fine_cells,
+            # entries per fine cell; linked lists do not know their coarse share, so it is counted in there
+            mean_list=(lists.entries - max(lists.coarse_entries, 0)) / grid.fine_cells,
             upload_s=t1 - t0, views_s=t2 - t1, lists_s=t3 - t2, records_s=t4 - t3, prepare_s=t4 - t0,
         )
 
