@@ -1,5 +1,8 @@
 """Scenes: named objects (triangle meshes), lights and a camera, built in code or read from TOML.
 
+In code: ``Scene([(name, mesh), ...], [light, ...], camera=None, name=..., colors=None, render_size=None)``;
+from a file: ``Scene.load("scenes/default.toml")``.
+
 Scene file format (TOML; y is up; lengths in scene units, angles in degrees)::
 
     name = "demo"                      # optional; default: the file name without .toml
@@ -28,22 +31,24 @@ Scene file format (TOML; y is up; lengths in scene units, angles in degrees)::
 
 A shape table holds exactly one shape key, and optionally ``scale`` (a number or three),
 ``rotate`` (degrees about the world x, then y, then z axis) and ``translate``, applied in that order:
-scale, rotate, translate. The shape keys::
+scale, rotate, translate. The shape keys (primitive parameters are optional, defaults shown)::
 
-    sphere = { radius = 1, segments = 32 }                       # manifold3d primitives; segments
-    box = { size = [1, 1, 1], center = false }                   #   of a sphere round up to 4k;
-    cylinder = { height = 1, radius = 1, radius_top = 1,         #   a cylinder stands on z = 0
-                 segments = 32, center = false }                 #   along z (rotate = [-90, 0, 0]: y)
-    union = [shape, ...]                                         # CSG over shape tables, each a
-    difference = [shape, minus, ...]                             #   primitive or CSG with its own
-    intersection = [shape, ...]                                  #   transforms
-    mesh = "models/bunny.obj"          # OBJ/PLY/STL/OFF, relative to the scene file (~ and absolute ok)
-    triangles = { vertices = [[x, y, z], ...], faces = [[i, j, k], ...] }   # raw, kept as written
+    sphere = { radius = 1, segments = 32 }            # segments round up to a multiple of 4
+    box = { size = [1, 1, 1], center = false }        # size may be one number; corner at the origin
+    cylinder = { height = 1, radius = 1, radius_top = 1, segments = 32, center = false }
+                                                      # along z from z = 0; radius_top defaults to
+                                                      # radius, 0 makes a cone; stand it up along y
+                                                      # with rotate = [-90, 0, 0]
+    union = [shape, ...]                              # CSG: each item is a shape table (primitive
+    difference = [shape, minus, ...]                  # or CSG, with its own transforms); TOML's
+    intersection = [shape, ...]                       # [[objects.union]] tables work too
+    mesh = "models/bunny.obj"                         # OBJ/PLY/STL/OFF, relative to the scene file
+                                                      # (~ and absolute paths allowed)
+    triangles = { vertices = [[x, y, z], ...], faces = [[i, j, k], ...] }
 
-The values shown are the defaults (``box`` ``size`` may be one number). Primitives and CSG go through
-manifold3d, so they are closed and manifold; ``mesh`` files and inline ``triangles`` are kept as
-written (degenerate, duplicated, open or non-manifold triangles included) and cannot be used inside
-CSG. Mesh files are transformed in float64; every object is stored float32.
+Primitives and CSG go through manifold3d, so they are closed and manifold. ``mesh`` files and inline
+``triangles`` are kept as written (degenerate, duplicated, open or non-manifold triangles included)
+and cannot be used inside CSG. Mesh files are transformed in float64; every object is stored float32.
 
 Without ``[camera]``, :func:`default_camera` looks at the centre of the scene's bounding box from the
 front-right and above, far enough to see the whole box. Every error raises ``ValueError``,
@@ -70,7 +75,7 @@ from .views import Camera
 
 DEFAULT_SEGMENTS = 32
 DEFAULT_FOV = 45.0
-# Seen from the default camera: right of, above and in front of the scene's centre.
+# From the scene's centre towards the default camera: to the right (+x), above (+y), in front (+z).
 DEFAULT_VIEW_DIRECTION = (1.0, 0.8, 1.4)
 # Linear RGB for objects without a colour, by object index.
 PALETTE = np.array(
@@ -84,15 +89,7 @@ PALETTE = np.array(
     ]
 )
 
-TRANSFORM_KEYS = ("scale", "rotate", "translate")
-PRIMITIVE_KEYS = ("sphere", "box", "cylinder")
-CSG_OPERATORS = {"union": operator.add, "difference": operator.sub, "intersection": operator.xor}
-RAW_KEYS = ("mesh", "triangles")
-SHAPE_KEYS = PRIMITIVE_KEYS + tuple(CSG_OPERATORS) + RAW_KEYS
-OBJECT_KEYS = ("name", "color") + SHAPE_KEYS + TRANSFORM_KEYS
-SCENE_KEYS = ("name", "render", "camera", "lights", "objects")
-
-_REQUIRED = object()  # default of a key that must be present
+__all__ = ["Scene", "default_camera"]
 
 
 class Scene:
@@ -131,12 +128,12 @@ class Scene:
     def load(cls, path) -> "Scene":
         """Read a scene file (format in the module docstring); errors name the file and key path."""
         path = Path(path)
-        with located(str(path)):
+        with _located(str(path)):
             if not path.is_file():
                 raise FileNotFoundError("no such scene file")
             with path.open("rb") as file:
                 document = tomllib.load(file)
-            return _read_scene(Table(document, ""), path)
+            return _read_scene(_Table(document, ""), path)
 
     @property
     def light(self):
@@ -145,14 +142,8 @@ class Scene:
 
     def object_ids(self) -> np.ndarray:
         """(F,) int32: the index in :attr:`objects` of each triangle of :attr:`mesh`."""
-        return self._object_ids
-
-    @cached_property
-    def _object_ids(self) -> np.ndarray:
         counts = [len(mesh.faces) for _, mesh in self.objects]
-        ids = np.repeat(np.arange(len(counts), dtype=np.int32), counts)
-        ids.flags.writeable = False
-        return ids
+        return np.repeat(np.arange(len(counts), dtype=np.int32), counts)
 
     @cached_property
     def triangle_colors(self) -> np.ndarray:
@@ -230,7 +221,7 @@ def _checked_size(size) -> tuple[int, int]:
 
 
 @contextmanager
-def located(where: str):
+def _located(where: str):
     """Re-raise a ValueError, TypeError or FileNotFoundError from the block with ``where: `` in front."""
     try:
         yield
@@ -249,7 +240,10 @@ def _is_number(value) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
-class Table:
+_REQUIRED = object()  # default of a key that must be present
+
+
+class _Table:
     """A TOML table and its key path; values are read with checks whose errors name the key path."""
 
     def __init__(self, data, where: str):
@@ -277,8 +271,10 @@ class Table:
             raise self.invalid(key, "missing")
         return True
 
-    def raw(self, key: str, default=_REQUIRED):
-        return default if self._absent(key, default) else self.data[key]
+    def raw(self, key: str):
+        """The value at ``key``, unchecked; it must be present."""
+        self._absent(key, _REQUIRED)
+        return self.data[key]
 
     def number(self, key: str, default=_REQUIRED, positive: bool = False) -> float:
         if self._absent(key, default):
@@ -328,18 +324,57 @@ class Table:
             raise TypeError(f"{self.path(key)}: expected {expected}, got {value!r}")
         return vector3(self.path(key), value, nonzero=nonzero)
 
-    def table(self, key: str, default=_REQUIRED) -> "Table | None":
-        return default if self._absent(key, default) else Table(self.data[key], self.path(key))
+    def table(self, key: str, default=_REQUIRED) -> "_Table | None":
+        return default if self._absent(key, default) else _Table(self.data[key], self.path(key))
 
-    def tables(self, key: str) -> "list[Table]":
+    def tables(self, key: str) -> "list[_Table]":
         """The array of tables at ``key`` (empty when absent)."""
         items = self.data.get(key, [])
         if not isinstance(items, list):
             raise TypeError(f"{self.path(key)}: expected an array of tables, got {_toml_type(items)}")
-        return [Table(item, f"{self.path(key)}[{index}]") for index, item in enumerate(items)]
+        return [_Table(item, f"{self.path(key)}[{index}]") for index, item in enumerate(items)]
 
 
-def _read_scene(root: Table, path: Path) -> Scene:
+def _sphere(params: _Table):
+    params.allow_only(("radius", "segments"))
+    radius = params.number("radius", 1.0, positive=True)
+    return Manifold.sphere(radius, params.integer("segments", DEFAULT_SEGMENTS, minimum=3))
+
+
+def _box(params: _Table):
+    params.allow_only(("size", "center"))
+    size = params.vector("size", (1.0, 1.0, 1.0), scalar_ok=True)
+    if not np.all(size > 0):
+        raise params.invalid("size", f"must be positive, got {size.tolist()}")
+    return Manifold.cube(tuple(size), params.flag("center", False))
+
+
+def _cylinder(params: _Table):
+    params.allow_only(("height", "radius", "radius_top", "segments", "center"))
+    radius = params.number("radius", 1.0, positive=True)
+    radius_top = params.number("radius_top", radius)
+    if radius_top < 0:
+        raise params.invalid("radius_top", f"must not be negative, got {radius_top}")
+    return Manifold.cylinder(
+        params.number("height", 1.0, positive=True),
+        radius,
+        radius_top,
+        params.integer("segments", DEFAULT_SEGMENTS, minimum=3),
+        params.flag("center", False),
+    )
+
+
+PRIMITIVES = {"sphere": _sphere, "box": _box, "cylinder": _cylinder}
+
+CSG_OPERATORS = {"union": operator.add, "difference": operator.sub, "intersection": operator.xor}
+RAW_KEYS = ("mesh", "triangles")  # shapes kept as written, never through manifold3d
+SHAPE_KEYS = tuple(PRIMITIVES) + tuple(CSG_OPERATORS) + RAW_KEYS
+TRANSFORM_KEYS = ("scale", "rotate", "translate")
+OBJECT_KEYS = ("name", "color") + SHAPE_KEYS + TRANSFORM_KEYS
+SCENE_KEYS = ("name", "render", "camera", "lights", "objects")
+
+
+def _read_scene(root: _Table, path: Path) -> Scene:
     root.allow_only(SCENE_KEYS)
     objects, colors = [], []
     for table in root.tables("objects"):
@@ -359,15 +394,15 @@ def _read_scene(root: Table, path: Path) -> Scene:
     )
 
 
-def _read_camera(table: Table) -> Camera:
+def _read_camera(table: _Table) -> Camera:
     table.allow_only(("position", "target", "up", "fov"))
     position, target = table.vector("position"), table.vector("target")
     up, fov = table.vector("up", (0.0, 1.0, 0.0), nonzero=True), table.number("fov", DEFAULT_FOV, positive=True)
-    with located(table.where):  # a target at the eye, or up along the view
+    with _located(table.where):  # a target at the eye, or up along the view
         return Camera(position, target, up, fov)
 
 
-def _read_light(table: Table):
+def _read_light(table: _Table):
     kind = table.text("type")
     if kind == "point":
         table.allow_only(("type", "position"))
@@ -378,12 +413,12 @@ def _read_light(table: Table):
     raise table.invalid("type", f'expected "point" or "directional", got {kind!r}')
 
 
-def _read_render_size(table: Table) -> tuple[int, int]:
+def _read_render_size(table: _Table) -> tuple[int, int]:
     table.allow_only(("width", "height"))
     return table.integer("width"), table.integer("height")
 
 
-def _read_object(table: Table, base_dir: Path) -> tuple[str, Mesh, np.ndarray | None]:
+def _read_object(table: _Table, base_dir: Path) -> tuple[str, Mesh, np.ndarray | None]:
     """An object table: its name, its mesh and its colour (None when not given)."""
     table.allow_only(OBJECT_KEYS)
     kind = _shape_key(table)
@@ -393,7 +428,7 @@ def _read_object(table: Table, base_dir: Path) -> tuple[str, Mesh, np.ndarray | 
     return table.text("name", default_name), mesh, color
 
 
-def _shape_key(table: Table) -> str:
+def _shape_key(table: _Table) -> str:
     """The one shape key of a shape table."""
     present = [key for key in SHAPE_KEYS if key in table.data]
     if len(present) != 1:
@@ -402,7 +437,7 @@ def _shape_key(table: Table) -> str:
     return present[0]
 
 
-def _build_shape(table: Table, kind: str, base_dir: Path) -> Mesh:
+def _build_shape(table: _Table, kind: str, base_dir: Path) -> Mesh:
     """The transformed mesh of a shape table whose shape key is ``kind``."""
     if kind == "mesh":
         return _mesh_file(table, base_dir).transformed(_transform_matrix(table))
@@ -415,23 +450,24 @@ def _build_shape(table: Table, kind: str, base_dir: Path) -> Mesh:
     return Mesh(np.asarray(result.vert_properties)[:, :3], np.asarray(result.tri_verts))
 
 
-def _mesh_file(table: Table, base_dir: Path) -> Mesh:
+def _mesh_file(table: _Table, base_dir: Path) -> Mesh:
     path = (base_dir / Path(table.text("mesh")).expanduser()).resolve()
     if not path.is_file():
         raise FileNotFoundError(f"{table.path('mesh')}: no such file {path}")
-    with located(table.path("mesh")):  # an unsupported format or an unreadable file
+    with _located(table.path("mesh")):  # an unsupported format or an unreadable file
         return Mesh.load(path)
 
 
-def _inline_triangles(table: Table) -> Mesh:
+def _inline_triangles(table: _Table) -> Mesh:
     table.allow_only(("vertices", "faces"))
-    with located(table.where):
-        return Mesh(table.raw("vertices"), table.raw("faces"))
+    vertices, faces = table.raw("vertices"), table.raw("faces")
+    with _located(table.where):
+        return Mesh(vertices, faces)
 
 
-def _build_solid(table: Table, kind: str):
+def _build_solid(table: _Table, kind: str):
     """The transformed manifold3d solid of a primitive or CSG shape table."""
-    if kind in PRIMITIVE_KEYS:
+    if kind in PRIMITIVES:
         solid = PRIMITIVES[kind](table.table(kind))
     elif kind in CSG_OPERATORS:
         solid = _combine(table, kind)
@@ -440,7 +476,7 @@ def _build_solid(table: Table, kind: str):
     return solid.transform(_transform_matrix(table)[:3])
 
 
-def _combine(table: Table, operation: str):
+def _combine(table: _Table, operation: str):
     items = table.tables(operation)
     if not items:
         raise table.invalid(operation, "expected at least one shape table")
@@ -451,38 +487,7 @@ def _combine(table: Table, operation: str):
     return reduce(CSG_OPERATORS[operation], solids)
 
 
-def _sphere(params: Table):
-    params.allow_only(("radius", "segments"))
-    return Manifold.sphere(params.number("radius", 1.0, positive=True), params.integer("segments", DEFAULT_SEGMENTS, minimum=3))
-
-
-def _box(params: Table):
-    params.allow_only(("size", "center"))
-    size = params.vector("size", (1.0, 1.0, 1.0), scalar_ok=True)
-    if not np.all(size > 0):
-        raise params.invalid("size", f"must be positive, got {size.tolist()}")
-    return Manifold.cube(tuple(size), params.flag("center", False))
-
-
-def _cylinder(params: Table):
-    params.allow_only(("height", "radius", "radius_top", "segments", "center"))
-    radius = params.number("radius", 1.0, positive=True)
-    radius_top = params.number("radius_top", radius)
-    if radius_top < 0:
-        raise params.invalid("radius_top", f"must not be negative, got {radius_top}")
-    return Manifold.cylinder(
-        params.number("height", 1.0, positive=True),
-        radius,
-        radius_top,
-        params.integer("segments", DEFAULT_SEGMENTS, minimum=3),
-        params.flag("center", False),
-    )
-
-
-PRIMITIVES = {"sphere": _sphere, "box": _box, "cylinder": _cylinder}
-
-
-def _transform_matrix(table: Table) -> np.ndarray:
+def _transform_matrix(table: _Table) -> np.ndarray:
     """4x4 float64 affine map of a shape table's scale, then rotate, then translate."""
     scale = table.vector("scale", (1.0, 1.0, 1.0), scalar_ok=True)
     if not np.all(scale != 0):
