@@ -192,6 +192,25 @@ def test_raster_matches_reference_on_kernel_corners(device, rng, kind, width, he
         np.testing.assert_array_equal(zbuffer.depth > 0, zbuffer.mask)
 
 
+# Depth only ---------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("scene", ["dyadic", "perspective", "orthographic", "inside a sphere"])
+def test_depth_map_is_bit_identical_to_rasterize_depth(device, rng, scene):
+    if scene == "dyadic":
+        mesh, view = dyadic_soup(rng, 300)[0], dyadic_view(129, 31)
+    elif scene == "inside a sphere":
+        _, mesh, view, _ = closed_mesh_scenes(rng)[1]
+    else:
+        mesh, view = random_soup(rng, scene)
+    depth = raster.depth_map(device, mesh, view)
+    assert depth.view is view and depth.shape == (view.height, view.width)
+    expected = raster.rasterize(device, mesh, view).depth
+    got = depth.read()
+    assert got.dtype == np.float32 and got.any()
+    np.testing.assert_array_equal(got.view(np.uint32), expected.view(np.uint32))
+
+
 # Shared edges: every pixel drawn exactly once -----------------------------------------------------
 
 
@@ -444,6 +463,10 @@ BAD_INPUTS = [
      r"depth buffer \(32768 x 16384\): needs 2048 MiB"),
     (lambda d: raster.rasterize(d, FAR, view_with(origin=np.array([-3e38, 0, 0]))), ValueError,
      r"mesh: vertices relative to view.origin overflow float32"),
+    (lambda d: raster.depth_map(d, "mesh", VIEW), TypeError, r"mesh: expected a shadowcl.Mesh"),
+    (lambda d: raster.depth_map(d, MESH, view_with(height=0)), ValueError, r"view.height: must be between 1 and"),
+    (lambda d: raster.depth_map(d, MESH, view_with(width=2**15, height=2**14)), ValueError,
+     r"depth buffer \(32768 x 16384\): needs 2048 MiB"),
     (lambda d: raster.receivers(d, MESH, VIEW, "zbuffer"), TypeError, r"zbuffer: expected a ZBuffer"),
     (lambda d: raster.receivers(d, FAR, VIEW, raster.rasterize(d, MESH, VIEW)), ValueError,
      r"zbuffer: was drawn from a different mesh"),

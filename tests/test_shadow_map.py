@@ -15,11 +15,13 @@ import numpy as np
 import pytest
 
 import shadowcl as sc
+from shadowcl import lightspace
 from shadowcl.exact import ExactMethod
 from shadowcl.methods import default_eps, shadow_mask
 from shadowcl.metrics import mask_error
 from shadowcl.reference import raster as raster_ref
 from shadowcl.reference import shadow_map as ref
+from shadowcl import shadow_map
 from shadowcl.shadow_map import ShadowMapMethod
 
 from test_exact import box, grid_plane, soup_mesh
@@ -48,9 +50,15 @@ def random_receivers(rng, n=4000):
     return points, normals / np.linalg.norm(normals, axis=1, keepdims=True)
 
 
+def host_maps(method) -> np.ndarray:
+    """(V, R, R) the method's depth maps read back; zeros (empty) for a cube face not drawn."""
+    maps = method.maps
+    return np.stack([np.zeros((maps.resolution,) * 2, np.float32) if d is None else d.read() for d in maps.depth])
+
+
 def reference_visibility(method, points, normals, **perturbation):
     maps = method.maps
-    return ref.visibility(points - maps.origin, normals, maps.kind, maps.to_light, maps.views, np.stack(maps.depth),
+    return ref.visibility(points - maps.origin, normals, maps.kind, maps.to_light, maps.views, host_maps(method),
                           method.bias_texels().astype(np.float64), method.bias, method.filter, method.pcf_size,
                           method.dither, method.seed, **perturbation)
 
@@ -74,7 +82,9 @@ def test_depth_maps_match_the_reference_rasterizer(device, rng, light_name):
     method = prepared(device, mesh, LIGHTS[light_name], points, resolution=64)
     assert method.maps.kind == light_name
     assert len(method.maps.depth) == (6 if light_name == "cube" else 1)
-    for k, (depth, view) in enumerate(zip(method.maps.depth, method.maps.raster_views)):
+    for k, depth_map in enumerate(method.maps.depth):
+        view, depth = depth_map.view, depth_map.read()
+        assert view is method.maps.raster_views[k]
         expected = raster_ref.rasterize(mesh, view)
         assert depth.shape == (64, 64) and depth.dtype == np.float32
         covered = expected.triangle >= 0
@@ -84,7 +94,68 @@ def test_depth_maps_match_the_reference_rasterizer(device, rng, light_name):
         error = np.abs(depth - expected.depth)[~tied]
         assert np.all(error <= DEPTH_RTOL * expected.depth[~tied]), f"{light_name} view {k}: max {error.max():.3g}"
         assert tied.sum() <= 0.01 * covered.sum(), f"{light_name} view {k}: {int(tied.sum())} tied texels"
-    assert sum(int((d > 0).sum()) for d in method.maps.depth) > 0
+    assert host_maps(method).any()
+
+
+# Cube faces no receiver reaches ------------------------------------------------------------------------
+
+
+def test_reached_faces_hold_the_face_of_every_point_in_the_box(rng):
+    for _ in range(200):
+        bounds = np.sort(rng.uniform(-2, 2, (2, 3)), axis=0)
+        eye = rng.uniform(-2.5, 2.5, 3)
+        reached = shadow_map.reached_faces(bounds, eye)
+        # the box's corners, the points nearest the eye's axes and random points, as the kernel picks faces
+        points = np.concatenate([lightspace.box_corners(bounds), np.clip(eye, *bounds)[None],
+                                 rng.uniform(*bounds, (500, 3))])
+        d = np.abs(points - eye)
+        axis = np.where((d[:, 0] >= d[:, 1]) & (d[:, 0] >= d[:, 2]), 0, np.where(d[:, 1] >= d[:, 2], 1, 2))
+        face = 2 * axis + ((points - eye)[np.arange(len(points)), axis] < 0)
+        assert reached[face].all(), (bounds, eye, reached, np.unique(face))
+    # a floor below the light (its box 2.4 to 3.2 below, x from -2 to 6 of it, z from -5 to 3):
+    # up is never reached, nor -x (2 across at most, 2.4 down at least)
+    floor = np.array([[-4.0, -0.2, -4.0], [4.0, 0.6, 4.0]])
+    reached = shadow_map.reached_faces(floor, np.array([-2.0, 3.0, 1.0]))
+    assert reached.tolist() == [True, False, False, True, True, True]
+
+
+def floor_under_a_close_light():
+    """A floor with a box on it and a plate above the light, the light close above the floor: a cube
+    whose upward face no floor point reaches. The plate shadows points above it."""
+    plate = grid_plane(2, 0.3, y=1.6)
+    plate = sc.Mesh(plate.vertices + [-1.0, 0.0, 0.4], plate.faces)
+    mesh = sc.Mesh.concatenate([grid_plane(8, 3.0), box((-0.5, 0.0, -0.5), (0.5, 0.6, 0.5)), plate])
+    return mesh, sc.PointLight((-1.0, 1.2, 0.4))
+
+
+def test_cube_faces_no_receiver_reaches_are_not_drawn(device, rng, monkeypatch):
+    mesh, light = floor_under_a_close_light()
+    xz = rng.uniform(-3.0, 3.0, (20000, 2))
+    points = np.column_stack([xz[:, 0], np.zeros(len(xz)), xz[:, 1]])
+    normals = np.tile([0.0, 1.0, 0.0], (len(points), 1))
+    method = prepared(device, mesh, light, points, resolution=128)
+    assert method.maps.kind == "cube" and method.maps.depth[2] is None          # +y
+    assert method.stats["drawn"] == sum(d is not None for d in method.maps.depth) < 6
+    got = method.visibility(points, normals)
+    assert method.maps.depth[2] is None, "points on the floor never use the upward face"
+    monkeypatch.setattr(shadow_map, "reached_faces", lambda bounds, eye: np.ones(6, bool))
+    every_face = prepared(device, mesh, light, points, resolution=128)
+    assert every_face.stats["drawn"] == 6
+    np.testing.assert_array_equal(got, every_face.visibility(points, normals))
+
+
+def test_a_point_whose_face_was_skipped_draws_it_first(device, rng):
+    """The rule for points outside the prepared bounds: classify draws the faces they reach, so the
+    answer is the one of all six faces. Points above the plate over the light are in its shadow."""
+    mesh, light = floor_under_a_close_light()
+    floor = np.column_stack([rng.uniform(-3, 3, 1000), np.zeros(1000), rng.uniform(-3, 3, 1000)])
+    method = prepared(device, mesh, light, floor, resolution=128)
+    assert method.maps.depth[2] is None
+    above = np.column_stack([rng.uniform(-1.05, -0.95, 500), np.full(500, 2.0), rng.uniform(0.35, 0.45, 500)])
+    mask = method.classify(above, np.tile([0.0, -1.0, 0.0], (500, 1)))
+    assert method.maps.depth[2] is not None
+    assert mask.all(), f"{int((~mask).sum())} points above the plate lit"
+    assert np.array_equal(mask, exact_mask(device, mesh, light, above, np.tile([0.0, -1.0, 0.0], (500, 1))))
 
 
 # Shadow test against the reference ------------------------------------------------------------------

@@ -16,6 +16,7 @@ Typical use::
 
     zbuffer = rasterize(device, mesh, view)
     found = receivers(device, mesh, view, zbuffer)   # world points and normals of covered pixels
+    light = depth_map(device, mesh, light_view)      # depth only, left on the device (shadow maps)
 """
 
 from __future__ import annotations
@@ -78,6 +79,25 @@ class ZBuffer:
 
 
 @dataclass(frozen=True, eq=False)
+class DepthMap:
+    """A view's nearest depths left on the device: ``buffer`` holds (H, W) float32 row-major, 0 = empty,
+    1 = nearest, bit for bit what :func:`rasterize` reads back as ``ZBuffer.depth``."""
+
+    buffer: cl.Buffer = field(repr=False)
+    view: View
+    device: Device = field(repr=False)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(H, W) texels."""
+        return self.view.height, self.view.width
+
+    def read(self) -> np.ndarray:
+        """The depths read back to the host, (H, W) float32."""
+        return self.device.from_device(self.buffer, self.shape, np.float32)
+
+
+@dataclass(frozen=True, eq=False)
 class Receivers:
     """The surface seen through each covered pixel, in row-major pixel order (M covered pixels)."""
 
@@ -137,16 +157,22 @@ def rasterize(device: Device, mesh: Mesh, view: View) -> ZBuffer:
     """
     _check(mesh, view)
     setup = _setup(device, mesh, view)
-    depth_dev = _image(device, view, 0, "depth buffer")
-    _draw(device, "raster_depth", setup, view, depth_dev)
+    depth = _depth_pass(device, setup, view)
     triangle_dev = _image(device, view, _EMPTY, "triangle buffer")
-    _draw(device, "raster_triangle", setup, view, depth_dev, triangle_dev)
-    shape = (view.height, view.width)
-    return ZBuffer(
-        device.from_device(depth_dev, shape, np.float32),
-        device.from_device(triangle_dev, shape, np.int32),
-        view, mesh, depth_dev, triangle_dev,
-    )
+    _draw(device, "raster_triangle", setup, view, depth.buffer, triangle_dev)
+    return ZBuffer(depth.read(), device.from_device(triangle_dev, depth.shape, np.int32), view, mesh,
+                   depth.buffer, triangle_dev)
+
+
+def depth_map(device: Device, mesh: Mesh, view: View) -> DepthMap:
+    """Only the nearest depth of every pixel of ``mesh`` seen by ``view``, left on the device.
+
+    The same triangle setup and depth pass as :func:`rasterize` (bit-identical depths) without the
+    triangle-id pass and without reading anything back: what a light's shadow map needs. Raises as
+    :func:`rasterize` does.
+    """
+    _check(mesh, view)
+    return _depth_pass(device, _setup(device, mesh, view), view)
 
 
 def coverage_count(device: Device, mesh: Mesh, view: View) -> np.ndarray:
@@ -278,6 +304,13 @@ def _setup(device: Device, mesh: Mesh, view: View) -> _Setup:
     )
     cl.enqueue_copy(device.queue, big_count, big_count_dev)  # sizes the big triangles' launch
     return _Setup(count, xy, depth, n, big, int(big_count[0]))
+
+
+def _depth_pass(device: Device, setup: _Setup, view: View) -> DepthMap:
+    """The nearest depth of every pixel of ``view`` from the triangles of ``setup``."""
+    buffer = _image(device, view, 0, "depth buffer")
+    _draw(device, "raster_depth", setup, view, buffer)
+    return DepthMap(buffer, view, device)
 
 
 def _draw(device: Device, kernel: str, setup: _Setup, view: View, *images: cl.Buffer) -> None:
