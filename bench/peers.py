@@ -39,8 +39,9 @@ def shadow_rays(points, normals, light, eps: float):
     length = np.sqrt(np.einsum("ij,ij->i", direction, direction))
     if normals is None:
         away = np.zeros(len(points), bool)
-    else:  # n . (light - point) = n . (light - start) + eps for a unit normal
-        away = np.einsum("ij,ij->i", normals.astype(np.float32), direction) + eps32 <= 0
+    else:  # point light: n . (light - point) = n . (light - start) + eps for a unit normal
+        facing = np.einsum("ij,ij->i", normals.astype(np.float32), direction)
+        away = (facing + eps32 if isinstance(light, PointLight) else facing) <= 0
     direction /= length[:, None]
     origins = start.astype(np.float32)
     origins += eps32 * direction
