@@ -289,6 +289,8 @@ def test_shadow_mask_api_and_methods_listing(device, rng):
 # Bad input ----------------------------------------------------------------------------------------
 
 BAD_PARAMS = [
+    (dict(dither=1.0), ValueError, "dither: expected one of 0, 1"),
+    (dict(bias_scale="2"), TypeError, "bias_scale: expected a number"),
     (dict(resolution=0), ValueError, "resolution"),
     (dict(resolution=1.5), TypeError, "resolution"),
     (dict(bias="huge"), ValueError, "bias"),
@@ -347,3 +349,15 @@ def test_render_shades_with_fractional_visibility_and_post_filter(device):
     windows = [(slice(max(r - 1, 0), r + 2), slice(max(c - 1, 0), c + 2)) for r, c in zip(*np.nonzero(mask))]
     expected = [image[w][mask[w]].mean() for w in windows]
     np.testing.assert_allclose(_box_filter(seen, values, 1), expected, rtol=1e-6)  # float32 result
+
+
+def test_single_view_refuses_points_outside_its_bounds(device, rng):
+    """Beyond the prepared bounds a single view cannot answer (behind the light, off the window)."""
+    mesh = grid_plane(4, 1.0)
+    points = np.column_stack([rng.uniform(-0.5, 0.5, 100), np.full(100, -0.5), rng.uniform(-0.5, 0.5, 100)])
+    method = prepared(device, mesh, sc.PointLight((0.0, 2.0, 0.0)), points)
+    assert method.maps.kind != "cube"
+    with pytest.raises(ValueError, match="points: outside the receiver_bounds"):
+        method.classify(np.array([[0.0, 3.0, 0.0]]), None)
+    with pytest.raises(ValueError, match="points: contains NaN or inf"):
+        method.classify(np.array([[0.0, np.nan, 0.0]]), None)

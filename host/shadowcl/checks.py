@@ -61,10 +61,19 @@ def non_negative_float(name: str, value) -> float:
 
 
 def positive_float(name: str, value) -> float:
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        raise TypeError(f"{name}: expected a number, got {value!r}") from None
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{name}: expected a number, got {value!r}")
+    number = float(value)
     if not (np.isfinite(number) and number > 0):
         raise ValueError(f"{name}: must be a finite positive number, got {value!r}")
     return number
+
+
+def check_bounds(name: str, bounds) -> np.ndarray:
+    """A (2, 3) finite float64 box with low <= high."""
+    box = finite_array(name, bounds, (3,))
+    if box.shape != (2, 3):
+        raise ValueError(f"{name}: expected shape (2, 3) (low and high corners), got {box.shape}")
+    if np.any(box[0] > box[1]):
+        raise ValueError(f"{name}: low corner {box[0].tolist()} exceeds high corner {box[1].tolist()}")
+    return box

@@ -51,7 +51,7 @@ import numpy as np
 import pyopencl as cl
 
 from . import lightspace
-from .checks import finite_array, positive_int
+from .checks import check_bounds, finite_array, positive_int
 from .geometry import Mesh, bounds_diagonal
 from .lights import PointLight, check_light
 
@@ -63,16 +63,6 @@ WT_FLOATS = 16
 
 def _optional_int(name, value, minimum=1, maximum=None):
     return None if value is None else positive_int(name, value, minimum, maximum)
-
-
-def check_bounds(name: str, bounds) -> np.ndarray:
-    """A (2, 3) finite float64 box with low <= high."""
-    box = finite_array(name, bounds, (3,))
-    if box.shape != (2, 3):
-        raise ValueError(f"{name}: expected shape (2, 3) (low and high corners), got {box.shape}")
-    if np.any(box[0] > box[1]):
-        raise ValueError(f"{name}: low corner {box[0].tolist()} exceeds high corner {box[1].tolist()}")
-    return box
 
 
 def _as_points(name: str, value) -> np.ndarray:

@@ -56,7 +56,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import lightspace, raster
-from .checks import positive_float, positive_int
+from .checks import check_bounds, finite_array, positive_float, positive_int
 from .geometry import Mesh, bounds_diagonal
 from .lights import check_light
 from .views import View
@@ -122,6 +122,7 @@ class ShadowMapMethod:
         self.seed = positive_int("seed", seed, 0, 2**32 - 1)
         self.maps: LightMaps | None = None
         self._mesh = self._views_dev = None   # what classify needs to draw a face late; the view table
+        self._receiver_bounds = None
 
     # Prepare ------------------------------------------------------------------------------------
     def prepare(self, mesh: Mesh, light, receiver_bounds: np.ndarray, eps: float) -> None:
@@ -133,9 +134,10 @@ class ShadowMapMethod:
         if not isinstance(mesh, Mesh):
             raise TypeError(f"mesh: expected a shadowcl.Mesh, got {type(mesh).__name__}")
         light = check_light(light)
-        receiver_bounds = np.asarray(receiver_bounds, dtype=np.float64)
+        receiver_bounds = check_bounds("receiver_bounds", receiver_bounds)
         box = np.stack([np.minimum(mesh.bounds[0], receiver_bounds[0]), np.maximum(mesh.bounds[1], receiver_bounds[1])])
-        origin = 0.5 * (box[0] + box[1])
+        # The frame is the occluders' centre: far receivers must not cost the depth maps their precision.
+        origin = 0.5 * (mesh.bounds[0] + mesh.bounds[1])
         scale = max(bounds_diagonal(box), 1e-30)
         resolution = self.resolution or DEFAULT_RESOLUTION
         fitted = lightspace.fit_views(light, receiver_bounds, origin, scale)
@@ -148,6 +150,7 @@ class ShadowMapMethod:
         self.maps = LightMaps(fitted.kind, origin, to_light, records, tuple(view for view, _ in views),
                               [None] * fitted.nviews, resolution)
         self._mesh, self._views_dev = mesh, self.device.to_device(records)
+        self._receiver_bounds = receiver_bounds
         self._draw(receiver_bounds - origin)
 
     def _draw(self, bounds: np.ndarray) -> None:
@@ -165,14 +168,16 @@ class ShadowMapMethod:
         if self.maps is None:
             raise RuntimeError("shadow_map: call prepare() before classify() or visibility()")
         maps, device = self.maps, self.device
-        points = np.asarray(points, dtype=np.float64)
-        if points.ndim != 2 or points.shape[1] != 3:
-            raise ValueError(f"points: expected shape (N, 3), got {points.shape}")
-        if normals is not None and np.shape(normals) != points.shape:
-            raise ValueError(f"normals: expected shape {points.shape} to match points, got {np.shape(normals)}")
+        points = finite_array("points", points, (3,))
+        if normals is not None:
+            normals = finite_array("normals", normals, (3,))
+            if normals.shape != points.shape:
+                raise ValueError(f"normals: expected shape {points.shape} to match points, got {normals.shape}")
         n = len(points)
         if n == 0:
             return np.zeros(0, dtype=np.float32)
+        if maps.kind != "cube":
+            self._check_inside(points)
         visibility_dev = device.empty(4 * n, "visibility")
         relative = np.ascontiguousarray(points - maps.origin, dtype=np.float32)
         if maps.kind == "cube":   # faces these points reach that prepare's bounds did not
@@ -184,6 +189,15 @@ class ShadowMapMethod:
                np.array([*maps.to_light, 0.0], dtype=np.float32), self._views_dev,
                *self._map_buffers(), self.bias_texels(), np.uint32(self.seed), np.int32(n), visibility_dev)
         return device.from_device(visibility_dev, n, np.float32)
+
+    def _check_inside(self, points: np.ndarray) -> None:
+        """A single view covers the prepared receiver bounds only (beyond them: behind a point light, or
+        off the map's window), so points outside are refused rather than answered wrongly."""
+        low, high = self._receiver_bounds
+        slack = 1e-6 * max(bounds_diagonal(self._receiver_bounds), 1e-30)
+        if np.any(points < low - slack) or np.any(points > high + slack):
+            raise ValueError("points: outside the receiver_bounds this shadow map was prepared for; "
+                             "prepare again with bounds that cover them")
 
     def _map_buffers(self) -> list:
         """The kernel's six map arguments: face k's map, a single view's map repeated; a face not drawn
@@ -227,7 +241,8 @@ class ShadowMapMethod:
 
 
 def _choice(name: str, value, choices: tuple):
-    if value not in choices or isinstance(value, bool):
+    # Same type as the choices too: 1.0 == 1 would otherwise reach a -D option as "1.0".
+    if isinstance(value, bool) or value not in choices or type(value) not in {type(c) for c in choices}:
         raise ValueError(f"{name}: expected one of {', '.join(map(repr, choices))}, got {value!r}")
     return value
 
