@@ -297,19 +297,18 @@ class _Table:
         return positive_int(self.path(key), value, minimum=minimum)
 
     def flag(self, key: str, default=_REQUIRED) -> bool:
-        if self._absent(key, default):
-            return default
-        value = self.data[key]
-        if not isinstance(value, bool):
-            raise TypeError(f"{self.path(key)}: expected true or false, got {_toml_type(value)}")
-        return value
+        return self._typed(key, default, bool, "true or false")
 
     def text(self, key: str, default=_REQUIRED) -> str:
+        return self._typed(key, default, str, "a string")
+
+    def _typed(self, key: str, default, kind: type, expected: str):
+        """The value of ``key`` if it is a ``kind`` (``default`` when absent and allowed)."""
         if self._absent(key, default):
             return default
         value = self.data[key]
-        if not isinstance(value, str):
-            raise TypeError(f"{self.path(key)}: expected a string, got {_toml_type(value)}")
+        if not isinstance(value, kind):
+            raise TypeError(f"{self.path(key)}: expected {expected}, got {_toml_type(value)}")
         return value
 
     def vector(self, key: str, default=_REQUIRED, nonzero: bool = False, scalar_ok: bool = False) -> np.ndarray:
