@@ -15,6 +15,16 @@ normals) inside those bounds and returns a bool (N,) mask, True = in shadow, wit
 ``../shared/DESIGN.md``: the segment from the point (moved ``eps`` along its normal when normals are
 given) to the light hits a triangle further than ``eps`` from the point; a normal facing away from the
 light (``dot <= 0``) is in shadow.
+
+Two optional parts of the protocol:
+
+- ``scene_input = True`` on the class: ``prepare`` receives what the caller passed (a ``Scene``, or
+  any object with a ``.mesh``, e.g. a subdivision surface) instead of its triangle mesh, for methods
+  that work on more than triangles.
+- ``classify_view(view, zbuffer, seen)``: :func:`shadowcl.render` calls it, when present, instead of
+  ``classify`` with the camera's ``View``, its ``raster.ZBuffer`` and ``raster.Receivers``; it returns the
+  bool mask of the covered pixels in ``seen``'s order, for methods that work in image space (a
+  stencil, scan-line runs).
 """
 
 from __future__ import annotations
@@ -68,6 +78,12 @@ def with_receiver_count(name: str, params: dict, count: int) -> dict:
     return params
 
 
+def occluders(cls, scene_or_mesh):
+    """What ``cls.prepare`` takes from ``scene_or_mesh``: the object itself for ``scene_input`` methods, else its mesh."""
+    mesh = as_mesh(scene_or_mesh)
+    return scene_or_mesh if getattr(cls, "scene_input", False) else mesh
+
+
 def as_mesh(scene_or_mesh) -> Mesh:
     """The occluding geometry of a :class:`Mesh` or a :class:`Scene`."""
     if isinstance(scene_or_mesh, Mesh):
@@ -112,5 +128,5 @@ def shadow_mask(scene_or_mesh, light, points, normals=None, method: str = "exact
     if len(points) == 0:
         return np.zeros(0, dtype=bool)
     receiver_bounds = np.stack([points.min(axis=0), points.max(axis=0)])
-    instance.prepare(mesh, light, receiver_bounds, eps)
+    instance.prepare(occluders(type(instance), scene_or_mesh), light, receiver_bounds, eps)
     return instance.classify(points, normals)

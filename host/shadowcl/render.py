@@ -19,7 +19,7 @@ from . import raster
 from .checks import non_negative_float, positive_int
 from .device import get_device
 from .geometry import bounds_diagonal
-from .methods import create_method, default_eps, with_receiver_count
+from .methods import create_method, default_eps, occluders, with_receiver_count
 from .scene import Scene
 
 AMBIENT = 0.18
@@ -98,9 +98,12 @@ def render_report(scene, method: str = "exact", width=None, height=None, device=
     for index, light in enumerate(scene.lights):
         shadower = create_method(method, device, **with_receiver_count(method, params, len(seen.points)))
         with stage("prepare"):
-            shadower.prepare(mesh, light, scene.bounds, eps)
+            shadower.prepare(occluders(type(shadower), scene), light, scene.bounds, eps)
         with stage("classify"):
-            if hasattr(shadower, "visibility"):
+            if hasattr(shadower, "classify_view"):
+                shadow[index] = shadower.classify_view(view, zbuffer, seen)
+                visibility[index] = ~shadow[index]
+            elif hasattr(shadower, "visibility"):
                 visibility[index] = shadower.visibility(seen.points, seen.normals)
                 shadow[index] = visibility[index] < 0.5
             else:
