@@ -45,6 +45,15 @@ scale, rotate, translate. The shape keys (primitive parameters are optional, def
     mesh = "models/bunny.obj"                         # OBJ/PLY/STL/OFF, relative to the scene file
                                                       # (~ and absolute paths allowed)
     triangles = { vertices = [[x, y, z], ...], faces = [[i, j, k], ...] }
+    subdivision = "models/cage.obj"                   # a Catmull-Clark control mesh (OBJ, any polygons)
+    subdivision = { vertices = [[x, y, z], ...], faces = [[i, j, k, l], ...] }   # inline control mesh
+    tessellation = 8                                  # subdivision only: segments per control edge
+                                                      # (default: SubdivisionSurface.default_segments)
+
+A ``subdivision`` object is a :class:`~shadowcl.subdivision.SubdivisionSurface` (its transform applied
+to the control points, which moves the limit surface exactly); it is listed in :attr:`Scene.surfaces`
+and its tessellation is its mesh in :attr:`Scene.objects`, so every triangle method works unchanged. In
+code, an object may also be ``(name, surface)`` or ``(name, surface, segments)``.
 
 Primitives and CSG go through manifold3d, so they are closed and manifold. ``mesh`` files and inline
 ``triangles`` are kept as written (degenerate, duplicated, open or non-manifold triangles included)
@@ -71,6 +80,7 @@ from manifold3d import Manifold
 from .checks import positive_int, vector3
 from .geometry import Mesh, bounds_diagonal
 from .lights import DirectionalLight, PointLight
+from .subdivision import SubdivisionSurface
 from .views import Camera
 
 DEFAULT_SEGMENTS = 32
@@ -97,6 +107,8 @@ class Scene:
 
     Attributes:
         objects: list of ``(name, Mesh)``, in file order.
+        surfaces: list of ``(name, SubdivisionSurface)`` (world coordinates) of the subdivision objects;
+            each one's tessellation is its entry in ``objects``.
         colors: (objects, 3) float64 linear RGB of each object.
         mesh: all objects concatenated into one :class:`Mesh` (object order, then face order).
         lights: list of :class:`PointLight` / :class:`DirectionalLight`, at least one.
@@ -109,7 +121,9 @@ class Scene:
     """
 
     def __init__(self, objects, lights, camera=None, name="scene", colors=None, render_size=None, path=None):
-        """``objects`` is a list of ``(name, Mesh)``; ``colors`` optionally one RGB (or None) each."""
+        """``objects`` is a list of ``(name, Mesh)``, ``(name, SubdivisionSurface)`` or
+        ``(name, SubdivisionSurface, segments)``; ``colors`` optionally one RGB (or None) each."""
+        objects, self.surfaces = _tessellated(objects)
         self.objects = _checked_objects(objects)
         self.colors = _object_colors(colors, len(self.objects))
         self.lights = _checked_lights(lights)
@@ -179,6 +193,23 @@ def _checked_objects(objects) -> list[tuple[str, Mesh]]:
         if not (isinstance(item, tuple) and len(item) == 2 and isinstance(item[0], str) and isinstance(item[1], Mesh)):
             raise TypeError(f"objects[{index}]: expected a (name, Mesh) pair, got {item!r}")
     return list(objects)
+
+
+def _tessellated(objects) -> tuple:
+    """(objects with each subdivision surface replaced by its tessellation, [(name, surface), ...])."""
+    if not isinstance(objects, (list, tuple)):
+        return objects, []  # _checked_objects names the error
+    out, surfaces = [], []
+    for index, item in enumerate(objects):
+        if isinstance(item, tuple) and len(item) in (2, 3) and isinstance(item[1], SubdivisionSurface):
+            if len(item) == 3 and item[2] is not None:
+                mesh = item[1].tessellate(segments=positive_int(f"objects[{index}] segments", item[2]))
+            else:
+                mesh = item[1].tessellate()
+            surfaces.append((item[0], item[1]))
+            item = (item[0], mesh)
+        out.append(item)
+    return out, surfaces
 
 
 def _checked_lights(lights) -> list:
@@ -367,9 +398,10 @@ PRIMITIVES = {"sphere": _sphere, "box": _box, "cylinder": _cylinder}
 
 CSG_OPERATORS = {"union": operator.add, "difference": operator.sub, "intersection": operator.xor}
 RAW_KEYS = ("mesh", "triangles")  # shapes kept as written, never through manifold3d
-SHAPE_KEYS = tuple(PRIMITIVES) + tuple(CSG_OPERATORS) + RAW_KEYS
+SUBDIVISION_KEY = "subdivision"  # a Catmull-Clark control mesh, kept as a SubdivisionSurface
+SHAPE_KEYS = tuple(PRIMITIVES) + tuple(CSG_OPERATORS) + RAW_KEYS + (SUBDIVISION_KEY,)
 TRANSFORM_KEYS = ("scale", "rotate", "translate")
-OBJECT_KEYS = ("name", "color") + SHAPE_KEYS + TRANSFORM_KEYS
+OBJECT_KEYS = ("name", "color") + SHAPE_KEYS + TRANSFORM_KEYS + ("tessellation",)
 SCENE_KEYS = ("name", "render", "camera", "lights", "objects")
 
 
@@ -377,8 +409,8 @@ def _read_scene(root: _Table, path: Path) -> Scene:
     root.allow_only(SCENE_KEYS)
     objects, colors = [], []
     for table in root.tables("objects"):
-        name, mesh, color = _read_object(table, path.parent)
-        objects.append((name, mesh))
+        name, shape, color = _read_object(table, path.parent)
+        objects.append((name,) + (shape if isinstance(shape, tuple) else (shape,)))
         colors.append(color)
     camera = root.table("camera", None)
     render = root.table("render", None)
@@ -417,12 +449,18 @@ def _read_render_size(table: _Table) -> tuple[int, int]:
     return table.integer("width"), table.integer("height")
 
 
-def _read_object(table: _Table, base_dir: Path) -> tuple[str, Mesh, np.ndarray | None]:
-    """An object table: its name, its mesh and its colour (None when not given)."""
+def _read_object(table: _Table, base_dir: Path) -> tuple[str, "Mesh | tuple", np.ndarray | None]:
+    """An object table: its name, its mesh (or (surface, segments)) and its colour (None when not given)."""
     table.allow_only(OBJECT_KEYS)
     kind = _shape_key(table)
-    mesh = _build_shape(table, kind, base_dir)
-    default_name = Path(table.data[kind]).stem if kind == "mesh" else kind
+    if kind == SUBDIVISION_KEY:
+        mesh = (_subdivision(table, base_dir), table.integer("tessellation", None))
+    elif "tessellation" in table.data:
+        raise table.invalid("tessellation", "only allowed with a subdivision shape")
+    else:
+        mesh = _build_shape(table, kind, base_dir)
+    named_by_file = kind == "mesh" or (kind == SUBDIVISION_KEY and isinstance(table.data[kind], str))
+    default_name = Path(table.data[kind]).stem if named_by_file else kind
     color = _rgb(table.path("color"), table.vector("color")) if "color" in table.data else None
     return table.text("name", default_name), mesh, color
 
@@ -457,6 +495,23 @@ def _mesh_file(table: _Table, base_dir: Path) -> Mesh:
         return Mesh.load(path)
 
 
+def _subdivision(table: _Table, base_dir: Path) -> SubdivisionSurface:
+    """The transformed subdivision surface of an object table (an OBJ file or an inline control mesh)."""
+    value = table.raw(SUBDIVISION_KEY)
+    if isinstance(value, str):
+        path = (base_dir / Path(value).expanduser()).resolve()
+        if not path.is_file():
+            raise FileNotFoundError(f"{table.path(SUBDIVISION_KEY)}: no such file {path}")
+        with _located(table.path(SUBDIVISION_KEY)):
+            surface = SubdivisionSurface.load(path)
+    else:
+        inline = table.table(SUBDIVISION_KEY)
+        inline.allow_only(("vertices", "faces"))
+        with _located(inline.where):
+            surface = SubdivisionSurface(inline.raw("vertices"), inline.raw("faces"))
+    return surface.transformed(_transform_matrix(table))
+
+
 def _inline_triangles(table: _Table) -> Mesh:
     table.allow_only(("vertices", "faces"))
     vertices, faces = table.raw("vertices"), table.raw("faces")
@@ -471,7 +526,10 @@ def _build_solid(table: _Table, kind: str):
     elif kind in CSG_OPERATORS:
         solid = _combine(table, kind)
     else:
-        raise table.invalid(kind, "inline triangles and mesh files cannot be used in CSG (they need not be closed)")
+        raise table.invalid(
+            kind, "inline triangles, mesh files and subdivision surfaces cannot be used in CSG "
+            "(they need not be closed)"
+        )
     return solid.transform(_transform_matrix(table)[:3])
 
 
