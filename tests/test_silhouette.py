@@ -7,6 +7,8 @@ relative); those are counted and bounded, and left out of both sets.
 """
 
 import functools
+import json
+import sys
 
 import numpy as np
 import pytest
@@ -14,10 +16,10 @@ import pytest
 import shadowcl as sc
 from shadowcl.hard_cases import icosphere
 from shadowcl.reference import silhouette as ref
-from shadowcl.silhouette import (NONMANIFOLD, edge_adjacency, silhouette_edges, silhouette_loops,
-                                 vertex_balance)
+from shadowcl.silhouette import (NONMANIFOLD, Silhouette, SilhouetteTracker, edge_adjacency, host_facing,
+                                 silhouette_edges, silhouette_loops, vertex_balance)
 
-from conftest import require_models
+from conftest import PROJECT, require_models
 
 MAX_TIE_SHARE = 1e-3    # of the faces: random lights rarely pass near a face's plane
 
@@ -286,3 +288,249 @@ def test_a_mesh_stands_for_its_table(device):
 def test_bad_input(device, adjacency, light, error, match):
     with pytest.raises(error, match=match):
         silhouette_edges(device, adjacency, light)
+
+
+# Tracking and the randomized method (SilhouetteTracker) ------------------------------------------------
+def circling_lights(mesh, frames, degrees, radius=1.5, height=0.25, start=0.0):
+    """Point lights circling ``mesh`` by ``degrees`` per frame, ``radius`` diagonals from its centre."""
+    centre = mesh.bounds.mean(0)
+    diagonal = float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0]))
+    angles = np.radians(start + degrees * np.arange(frames))
+    return [sc.PointLight(centre + diagonal * np.array([radius * np.cos(a), height, radius * np.sin(a)]))
+            for a in angles]
+
+
+def follow(device, mesh, lights, **params):
+    """Run a tracker along ``lights``: (recalls, precisions, stats) per frame against brute force. Every
+    frame also checks that the tracker's ``facing`` (computed on use) is the kernel's."""
+    tracker = SilhouetteTracker(device, mesh, **params)
+    recalls, precisions, stats = [], [], []
+    for light in lights:
+        sil = tracker.update(light)
+        truth = silhouette_edges(device, mesh, light)
+        recall, precision = ref.recall_precision(sil.codes, truth.codes)
+        recalls.append(recall)
+        precisions.append(precision)
+        stats.append(dict(tracker.stats))
+    assert np.array_equal(sil.facing, truth.facing)
+    return np.array(recalls), np.array(precisions), stats
+
+
+def test_host_facing_is_the_kernels_bit_for_bit(device, rng):
+    # The tracker tests faces on the host; its answers must be the brute force's, ties included.
+    for mesh in (model("stanford-bunny"), sc.Mesh(icosphere(3).vertices.astype(np.float64) + 1e4, icosphere(3).faces)):
+        for light in random_lights(mesh, rng):
+            sil = silhouette_edges(device, mesh, light)
+            assert np.array_equal(host_facing(mesh.vertices, mesh.faces, light), sil.facing)
+            which = rng.choice(len(mesh.faces), 50)
+            assert np.array_equal(host_facing(mesh.vertices, mesh.faces, light, which), sil.facing[which])
+
+
+def test_brute_tracker_is_silhouette_edges(device, rng):
+    mesh = model("teapot")
+    tracker = SilhouetteTracker(device, mesh)
+    for light in random_lights(mesh, rng, 2, 1):
+        assert np.array_equal(tracker.update(light).codes, silhouette_edges(device, mesh, light).codes)
+
+
+@pytest.mark.parametrize("method, params", [("tracking", {"walks": "device"}), ("tracking", {"walks": "host"}),
+                                            ("random", {"fraction": 0.1})],
+                         ids=["tracking-device", "tracking-host", "random"])
+def test_icosphere_small_moves_find_every_edge(device, method, params):
+    # Convex: one loop; 2 degrees a frame. The random method's first frame needs one sampled edge on the
+    # loop (~70 of 1920 edges; 192 samples miss it with probability ~1e-3; seed 0 does not).
+    mesh = icosphere(3)
+    directional = [sc.DirectionalLight((np.cos(a), -0.3, np.sin(a))) for a in np.radians(np.arange(0, 20, 2.0))]
+    for lights in (circling_lights(mesh, 30, 2.0), directional):
+        recalls, precisions, stats = follow(device, mesh, lights, method=method, **params)
+        assert np.all(recalls == 1.0) and np.all(precisions == 1.0)
+        assert not any(s["fallback"] for s in stats)
+        if params.get("walks") != "device":                       # the device's walks do not count faces
+            assert all(s["faces_tested"] < len(mesh.faces) for s in stats[1:]), "a coherent frame tests few faces"
+
+
+def test_tracking_along_a_bunny_path(device, record_property):
+    # The issue's bar: >= 99 % of the brute-force silhouette edges, every frame, found edges all real.
+    # 3 degrees a frame; the bunny's scanned surface has ~150 loops, half of them 3-edge islands.
+    mesh = model("stanford-bunny")
+    recalls, precisions, stats = follow(device, mesh, circling_lights(mesh, 16, 3.0, start=40.0), method="tracking")
+    assert recalls.min() >= 0.99 and np.all(precisions == 1.0)
+    assert not any(s["fallback"] for s in stats[1:])               # small moves: tracked, not redone
+    record_property("recall_min", float(recalls.min()))
+
+
+def test_random_along_a_real_mesh_path(device, record_property):
+    # The teapot's smooth patches: few, long loops, which a 5 % sample plus last frame's edges keeps.
+    mesh = model("teapot")
+    recalls, precisions, _ = follow(device, mesh, circling_lights(mesh, 30, 3.0), method="random", fraction=0.05)
+    assert recalls[1:].min() >= 0.99 and np.all(precisions == 1.0)
+    record_property("recall_mean", float(recalls.mean()))
+
+
+def test_random_recall_on_the_bunny_grows_with_the_fraction(device):
+    # Markosian's trade: the bunny's single-face islands are found only when sampled, so recall < 1
+    # with a small fraction and rises with it; precision stays 1.
+    mesh = model("stanford-bunny")
+    lights = circling_lights(mesh, 8, 3.0)
+    low, precision_low, _ = follow(device, mesh, lights, method="random", fraction=0.02)
+    high, precision_high, _ = follow(device, mesh, lights, method="random", fraction=0.5)
+    assert np.all(precision_low == 1.0) and np.all(precision_high == 1.0)
+    assert 0.7 < low.mean() < high.mean() and high[1:].min() >= 0.98
+
+
+def test_large_jump_falls_back_to_brute_force(device):
+    # 90 degrees in one frame: most of last frame's edges are stale; the tracker says so and redoes the
+    # frame by brute force rather than returning a partial silhouette.
+    mesh = model("stanford-bunny")
+    lights = circling_lights(mesh, 2, 3.0) + circling_lights(mesh, 1, 0.0, start=93.0)
+    recalls, precisions, stats = follow(device, mesh, lights, method="tracking")
+    assert np.all(recalls == 1.0) and np.all(precisions == 1.0)
+    assert [s["fallback"] for s in stats] == [False, False, True] and stats[2]["stale"] > 0.5
+    assert stats[0]["faces_tested"] == len(mesh.faces)             # the first frame is brute force
+
+
+@pytest.mark.parametrize("walks", ["device", "host"])
+def test_walks_find_a_silhouette_that_moved_away(device, walks):
+    # A light 1.5 radii from a sphere lights a cap of 48 degrees; moved by 120 degrees, the new cap and
+    # the old one do not meet, so every seed must come from a III.B walk (stale share 1).
+    mesh = icosphere(3)
+    angle = np.radians(120.0)
+    lights = [sc.PointLight((1.5, 0.0, 0.0)), sc.PointLight((1.5 * np.cos(angle), 0.2, 1.5 * np.sin(angle)))]
+    recalls, precisions, stats = follow(device, mesh, lights, method="tracking", max_stale=1.0, max_walk=64,
+                                        walks=walks)
+    assert np.all(recalls == 1.0) and np.all(precisions == 1.0)
+    assert stats[1]["stale"] == 1.0 and not stats[1]["fallback"]
+    # Walks of one step cannot get there: lost, and the tracker falls back instead of losing the loop.
+    recalls, _, stats = follow(device, mesh, lights, method="tracking", max_stale=1.0, max_walk=1, max_lost=0.5,
+                               walks=walks)
+    assert stats[1]["fallback"] and stats[1]["lost_walks"] > 0.5 * stats[0]["edges_found"]   # a walk per old edge
+    assert np.all(recalls == 1.0)
+
+
+@pytest.mark.parametrize("method", ["tracking", "random"])
+def test_open_mesh_border_edges_are_tested(device, method):
+    # An icosphere without its top cap: border edges are silhouettes when their face faces the light
+    # (the module's border rule), tested every frame as the paper says.
+    sphere = icosphere(3)
+    centres = sphere.vertices[sphere.faces].mean(1)
+    mesh = sc.Mesh(sphere.vertices, sphere.faces[centres[:, 1] < 0.7])
+    assert len(edge_adjacency(mesh).border_edges) > 0
+    lights = circling_lights(mesh, 20, 4.0, height=0.6)
+    recalls, precisions, _ = follow(device, mesh, lights, method=method, fraction=0.1)
+    assert np.all(recalls == 1.0) and np.all(precisions == 1.0)
+
+
+@pytest.mark.parametrize("method", ["tracking", "random"])
+def test_tracking_degenerate_and_empty_tables(device, method):
+    # The cube with a zero-area sliver (faces no light) and a collapsed face (no edges): still every
+    # edge, frame by frame; a table with no edges at all gives empty silhouettes.
+    lights = [sc.PointLight((0.5 + 0.2 * i, -3.0, 0.6)) for i in range(4)]
+    recalls, precisions, _ = follow(device, degenerate_cube(), lights, method=method, fraction=0.5)
+    assert np.all(recalls == 1.0) and np.all(precisions == 1.0)
+    tracker = SilhouetteTracker(device, sc.Mesh(CUBE_VERTICES, [[0, 0, 1], [2, 3, 3]]), method=method)
+    assert all(tracker.update(light).codes.shape == (0,) for light in lights)
+
+
+def test_nonmanifold_and_misoriented_meshes(device):
+    fin = fin_mesh()
+    for method in ("tracking", "random"):
+        with pytest.raises(ValueError, match=rf"method='{method}'\): mesh: 1 non-manifold edges"):
+            SilhouetteTracker(device, fin, method=method)
+    sil = SilhouetteTracker(device, fin).update(sc.PointLight((0.3, 0.2, 2.0)))     # brute force reports it
+    assert sil.codes[edge_adjacency(fin).nonmanifold_edges].tolist() == [NONMANIFOLD]
+    faces = CUBE_FACES.copy()
+    faces[0] = faces[0][::-1]
+    cube = sc.Mesh(CUBE_VERTICES, faces)
+    for walks in ("host", "device"):
+        with pytest.raises(ValueError, match="wound the same way"):       # the III.C walk needs the winding
+            SilhouetteTracker(device, cube, method="tracking", walks=walks)
+    lights = [sc.PointLight((3.0, 2.0 + 0.1 * i, 1.5)) for i in range(5)]
+    recalls, precisions, _ = follow(device, cube, lights, method="random", fraction=1.0)   # growth is unoriented
+    assert np.all(recalls == 1.0) and np.all(precisions == 1.0)
+
+
+def test_reset_forgets_the_history(device):
+    mesh = icosphere(3)
+    lights = circling_lights(mesh, 3, 2.0)
+    for method in ("tracking", "random"):
+        tracker = SilhouetteTracker(device, mesh, method=method, fraction=0.1, seed=3)
+        first = [tracker.update(light).codes for light in lights]
+        tracker.reset()
+        assert np.array_equal(tracker.update(lights[0]).codes, first[0])
+        if method == "tracking":
+            assert tracker.stats["faces_tested"] == len(mesh.faces)     # a first frame again: brute force
+
+
+@pytest.mark.parametrize("name, degrees", [("stanford-bunny", 3.0), ("teapot", 15.0)])
+def test_device_walks_are_the_host_walks(device, name, degrees):
+    # kernels track_seeds and complete_loops against the NumPy walks: the same seeds, walks and loops,
+    # so the same edges, stale share and lost walks, frame by frame (the teapot is open).
+    mesh = model(name)
+    trackers = [SilhouetteTracker(device, mesh, method="tracking", walks=walks) for walks in ("device", "host")]
+    for light in circling_lights(mesh, 6, degrees):
+        on_device, on_host = (tracker.update(light) for tracker in trackers)
+        assert np.array_equal(on_device.codes, on_host.codes)
+        for key in ("stale", "lost_walks", "fallback"):
+            assert trackers[0].stats.get(key) == trackers[1].stats.get(key), key
+    assert trackers[0].stats["stale"] > 0 and not trackers[0].stats["fallback"]
+
+
+def test_device_batches_and_host_tests_agree(device):
+    # The same frames with every face test on the host and with large batches on the device.
+    mesh = model("stanford-bunny")
+    lights = circling_lights(mesh, 4, 3.0)
+    for method in ("tracking", "random"):
+        host = SilhouetteTracker(device, mesh, method=method, device_batch=10**9, walks="host")
+        batched = SilhouetteTracker(device, mesh, method=method, device_batch=1, walks="host")
+        for light in lights:
+            assert np.array_equal(host.update(light).codes, batched.update(light).codes)
+        assert host.stats["faces_tested"] < len(mesh.faces) == batched.stats["faces_tested"]
+
+
+@pytest.mark.parametrize("kwargs, error, match", [
+    ({"method": "fast"}, ValueError, "method: expected one of"),
+    ({"fraction": 0.0}, ValueError, "fraction: must be a finite positive"),
+    ({"fraction": 1.5}, ValueError, "fraction: must be at most 1"),
+    ({"seed": -1}, ValueError, "seed: must be at least 0"),
+    ({"seed": 1.5}, TypeError, "seed: expected an integer"),
+    ({"max_walk": 0}, ValueError, "max_walk: must be at least 1"),
+    ({"max_stale": 2.0}, ValueError, "max_stale: must be at most 1"),
+    ({"max_lost": 0.0}, ValueError, "max_lost: must be a finite positive"),
+    ({"concave_angle": -1.0}, ValueError, "concave_angle: must be a finite non-negative"),
+    ({"walks": "gpu"}, ValueError, "walks: expected 'device' or 'host'"),
+])
+def test_tracker_bad_input(device, kwargs, error, match):
+    with pytest.raises(error, match=match):
+        SilhouetteTracker(device, icosphere(1), **kwargs)
+
+
+def test_tracker_bad_mesh_and_light(device):
+    with pytest.raises(TypeError, match="mesh_or_adjacency: expected a Mesh or an EdgeAdjacency"):
+        SilhouetteTracker(device, CUBE_FACES)
+    with pytest.raises(TypeError, match="light: expected a PointLight or DirectionalLight"):
+        SilhouetteTracker(device, icosphere(1), method="tracking").update((0.0, 0.0, 5.0))
+
+
+def test_lazy_facing_on_host_and_device(device):
+    mesh = model("teapot")
+    light = sc.PointLight((3.0, 2.0, 1.0))
+    truth = silhouette_edges(device, mesh, light)
+    for on in (None, device):
+        assert np.array_equal(Silhouette(truth.adjacency, light, truth.codes, device=on).facing, truth.facing)
+
+
+def test_bench_quick_mode(tmp_path):
+    # bench/silhouettes.py --quick (teapot, short paths, one repeat): rows for every setting, all scored.
+    require_models()
+    sys.path.insert(0, str(PROJECT / "bench"))
+    try:
+        import silhouettes as bench
+    finally:
+        sys.path.remove(str(PROJECT / "bench"))
+    out = tmp_path / "s.json"
+    assert bench.main(["--quick", "--out", str(out)]) == 0
+    doc = json.loads(out.read_text())
+    assert len(doc["rows"]) == len(bench.SETTINGS) * len(bench.QUICK_PATHS)
+    assert all(row["precision_min"] == 1.0 for row in doc["rows"])
+    assert all(row["recall_min"] >= 0.99 for row in doc["rows"] if row["method"] == "tracking")
+    assert "Bar and fastest method" in out.with_suffix(".md").read_text()

@@ -30,9 +30,15 @@ Rules (the kernel, the reference and the tests share them):
 Tables follow the mesh's vertex indices: vertices repeated at texture seams are not welded, so a
 seam is a pair of border edges.
 
+For a moving light, :class:`SilhouetteTracker` gives the same :class:`Silhouette` frame after frame
+by brute force, by tracking (the paper's face walks, sections III.B-C) or by Markosian's randomized
+method; bench/silhouettes.py measures their time and recall.
+
 >>> adjacency = edge_adjacency(mesh)                     # cached per mesh
 >>> sil = silhouette_edges(device, adjacency, light)     # codes, mask, oriented edges
 >>> loops = silhouette_loops(sil)                        # closed vertex chains
+>>> tracker = SilhouetteTracker(device, mesh, method="tracking")
+>>> sil = tracker.update(light)                          # then the next light, and the next
 """
 
 from __future__ import annotations
@@ -42,7 +48,9 @@ from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
+import pyopencl as cl
 
+from .checks import non_negative_float, positive_float, positive_int
 from .device import get_device
 from .geometry import Mesh
 from .lights import Light, PointLight, check_light
@@ -186,19 +194,32 @@ def _build_adjacency(mesh: Mesh) -> EdgeAdjacency:
     )
 
 
-@dataclass(frozen=True, eq=False)
 class Silhouette:
     """Silhouette edges of one mesh against one light.
 
     ``codes`` (E,) int8 per edge of ``adjacency``: 0 none; +1 silhouette whose light-facing face runs
     from the edge's first vertex to its second; -1 the other way; :data:`NONMANIFOLD` not classified.
-    ``facing`` (F,) bool: light-facing faces.
+    ``facing`` (F,) bool: light-facing faces. When not given (a :class:`SilhouetteTracker` tests only
+    some faces), it is computed for every face on first use: by the ``face_facing`` kernel on
+    ``device`` if one is given, else by :func:`host_facing` (the same bits).
     """
 
-    adjacency: EdgeAdjacency
-    light: Light
-    codes: np.ndarray
-    facing: np.ndarray
+    def __init__(self, adjacency: EdgeAdjacency, light: Light, codes: np.ndarray, facing: "np.ndarray | None" = None,
+                 device=None):
+        self.adjacency, self.light, self.codes, self._device = adjacency, light, codes, device
+        if facing is not None:
+            self.__dict__["facing"] = facing            # the cached_property's slot
+
+    def __repr__(self) -> str:
+        return f"Silhouette({len(self.indices)} of {len(self.codes)} edges, light={self.light!r})"
+
+    @cached_property
+    def facing(self) -> np.ndarray:
+        """(F,) bool: light-facing faces."""
+        if self._device is None:
+            return host_facing(self.adjacency.vertices, self.adjacency.faces, self.light)
+        facing_g, _ = _facing_on_device(self._device, self.adjacency, self.light)
+        return self._device.from_device(facing_g, len(self.adjacency.faces), np.uint8).astype(bool)
 
     @cached_property
     def mask(self) -> np.ndarray:
@@ -238,21 +259,29 @@ def silhouette_edges(device, adjacency: "EdgeAdjacency | Mesh", light) -> Silhou
     elif not isinstance(adjacency, EdgeAdjacency):
         raise TypeError(f"adjacency: expected an EdgeAdjacency or a Mesh, got {type(adjacency).__name__}")
     light = check_light(light)
-    point = isinstance(light, PointLight)
-    vector = light.position if point else light.direction
-    options = (f"-DLIGHT_POINT={int(point)}",)
-    vertices_g, faces_g, edge_faces_g, edge_senses_g = adjacency.device_buffers(device)
+    facing_g, options = _facing_on_device(device, adjacency, light)
+    _, _, edge_faces_g, edge_senses_g = adjacency.device_buffers(device)
     nfaces, nedges = len(adjacency.faces), len(adjacency.edges)
-    facing_g = device.empty(nfaces, "face facing")
     codes_g = device.empty(nedges, "edge codes")
-    queue = device.queue
-    device.kernel("silhouette.cl", "face_facing", options)(
-        queue, (nfaces,), None, vertices_g, faces_g, np.int32(nfaces), *(np.float32(c) for c in vector), facing_g)
     device.kernel("silhouette.cl", "classify_edges", options)(
-        queue, (max(nedges, 1),), None, edge_faces_g, edge_senses_g, np.int32(nedges), facing_g, codes_g)
+        device.queue, _global_size(nedges), None, edge_faces_g, edge_senses_g, np.int32(nedges), facing_g, codes_g)
     return Silhouette(adjacency, light,
                       codes=device.from_device(codes_g, nedges, np.int8),
                       facing=device.from_device(facing_g, nfaces, np.uint8).astype(bool))
+
+
+def _facing_on_device(device, adjacency: EdgeAdjacency, light) -> tuple:
+    """Launch ``face_facing`` for every face: (the facing buffer, the build options)."""
+    point = isinstance(light, PointLight)
+    vector = light.position if point else light.direction
+    options = (f"-DLIGHT_POINT={int(point)}",)
+    vertices_g, faces_g, _, _ = adjacency.device_buffers(device)
+    nfaces = len(adjacency.faces)
+    facing_g = device.empty(nfaces, "face facing")
+    device.kernel("silhouette.cl", "face_facing", options)(
+        device.queue, _global_size(nfaces), None, vertices_g, faces_g, np.int32(nfaces),
+        *(np.float32(c) for c in vector), facing_g)
+    return facing_g, options
 
 
 @dataclass(frozen=True)
@@ -313,3 +342,463 @@ def _cycles(successor: np.ndarray) -> list[np.ndarray]:
         to_last, jump = to_last + to_last[jump], jump[jump]
     order = np.lexsort((-to_last, lowest))
     return np.split(order, np.flatnonzero(np.diff(lowest[order])) + 1) if n else []
+
+
+# Facing on the host ------------------------------------------------------------------------------------
+def host_facing(vertices: np.ndarray, faces: np.ndarray, light, which: "np.ndarray | None" = None) -> np.ndarray:
+    """Light-facing faces computed on the host, bit for bit as ``face_facing`` computes them.
+
+    float32 throughout, the kernel's operations in the kernel's order and no fused multiply-add
+    (vecmath.h turns contraction off), so every product and sum rounds as on the device. ``which``:
+    the face indices to test (default every face). The tracker tests a few faces per walk step this
+    way, cheaper than a kernel launch and read-back (bench/silhouettes.py measures both).
+    """
+    light = check_light(light)
+    tri = np.asarray(vertices, dtype=np.float32)[faces if which is None else faces[which]]
+    v0 = tri[:, 0]
+    a, b = tri[:, 1] - v0, tri[:, 2] - v0
+    nx = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    ny = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    nz = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    if isinstance(light, PointLight):
+        d = light.position.astype(np.float32) - v0
+        return nx * d[:, 0] + ny * d[:, 1] + nz * d[:, 2] > 0
+    lx, ly, lz = light.direction.astype(np.float32)
+    return nx * lx + ny * ly + nz * lz < 0           # the kernel's -(n . d) > 0
+
+
+# Tracking and the randomized method -------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class HalfEdges:
+    """Face-to-face tables for the walks. Half-edge ``h = 3 f + k`` is face f's edge k, running from
+    ``faces[f, k]`` (``tails[h]``) to ``faces[f, (k + 1) % 3]`` (``heads[h]``).
+
+    ``edge`` (3F,) the adjacency edge of each half-edge (-1 for collapsed faces); ``twin`` (3F,) the
+    half-edge of the other face on the same edge (-1 on a border: ``twin // 3`` is then -1, the
+    "missing face"); ``edge_halves`` (E, 2) each edge's half-edges in face order (-1 for a border's
+    second); ``vertex_offsets``/``vertex_edges`` the edges at each vertex (CSR). Built for meshes whose
+    edges have one or two faces.
+    """
+
+    tails: np.ndarray
+    heads: np.ndarray
+    edge: np.ndarray
+    twin: np.ndarray
+    edge_halves: np.ndarray
+    vertex_offsets: np.ndarray
+    vertex_edges: np.ndarray
+
+    @classmethod
+    def build(cls, adjacency: EdgeAdjacency) -> "HalfEdges":
+        faces = adjacency.faces.astype(np.int64)
+        nvertices, nhalves = len(adjacency.vertices), 3 * len(faces)
+        tails, heads = faces.reshape(-1), faces[:, [1, 2, 0]].reshape(-1)
+        kept = np.ones(nhalves, dtype=bool)
+        kept[(3 * adjacency.collapsed_faces[:, None] + np.arange(3)).reshape(-1)] = False
+        edges = adjacency.edges.astype(np.int64)
+        keys = np.minimum(tails, heads) * nvertices + np.maximum(tails, heads)
+        edge = np.full(nhalves, -1, dtype=np.int64)
+        edge[kept] = np.searchsorted(edges[:, 0] * nvertices + edges[:, 1], keys[kept])
+        # Sorted by (edge, face), the half-edges line up with the table's face_items.
+        halves = np.flatnonzero(kept)
+        halves = halves[np.lexsort((halves // 3, edge[halves]))]
+        first, count = adjacency.face_offsets[:-1], adjacency.face_count
+        second = np.where(count > 1, halves[np.minimum(first + 1, len(halves) - 1)], -1)
+        edge_halves = np.stack([halves[first], second], axis=1) if len(first) else np.zeros((0, 2), np.int64)
+        twin = np.full(nhalves, -1, dtype=np.int64)
+        pairs = edge_halves[count == 2]
+        twin[pairs[:, 0]], twin[pairs[:, 1]] = pairs[:, 1], pairs[:, 0]
+        ends = edges.reshape(-1)
+        order = np.argsort(ends, kind="stable")
+        return cls(tails=tails, heads=heads, edge=edge, twin=twin, edge_halves=edge_halves,
+                   vertex_offsets=np.r_[0, np.cumsum(np.bincount(ends, minlength=nvertices))],
+                   vertex_edges=order // 2)
+
+    def edges_at(self, vertices: np.ndarray) -> np.ndarray:
+        """The edges at each of ``vertices``, concatenated (with repeats)."""
+        starts = self.vertex_offsets[vertices]
+        counts = self.vertex_offsets[vertices + 1] - starts
+        within = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
+        return self.vertex_edges[np.repeat(starts, counts) + within]
+
+
+TRACKER_METHODS = ("brute", "tracking", "random")
+
+
+class SilhouetteTracker:
+    """Silhouette edges frame after frame for a moving light, by one of three methods.
+
+    - ``"brute"``: every edge classified on the device each frame (:func:`silhouette_edges`).
+    - ``"tracking"`` (Fawad, Wang & Wu, sections III.B-C, after Tom H.'s silhouette tracking): the
+      first frame is brute force (the paper needs a silhouette to start from). Then from each of last
+      frame's silhouette edges: if it is still one it is a seed; if both its faces now face the light
+      the silhouette moved away, and a zigzag walk (``find_edge_by_walk``, left and right in turn)
+      crosses light-facing faces from the face that turned until a neighbour faces away; if both face
+      away, the walk crosses faces facing away from the face that turned until a neighbour faces the
+      light. Walks stop after ``max_walk`` faces (counted as lost). From every seed the loop is completed
+      by the walk of section III.C: around the seed's vertex through light-facing faces to the next
+      face whose neighbour faces away, which gives the next edge of the loop, until an edge already
+      found. As the paper adds, border edges are tested every frame (open meshes), and so are concave
+      edges of at least ``180 + concave_angle`` degrees, where new loops are born.
+      Jumps: when more than ``max_stale`` of last frame's edges are no longer silhouettes, or more than
+      ``max_lost`` of the walks are lost, or fewer than ``1 - max_stale`` times last frame's edges
+      are found, the frame is redone by brute force (``stats["fallback"]``): no silent loss after a
+      large light move. (Small loops that vanish leave lost walks too, ~12 % of the bunny's walks at
+      3 degrees a frame, hence a share rather than any loss.)
+    - ``"random"`` (Markosian et al. 1997, as the paper uses it): test a random ``fraction`` of the
+      edges (drawn anew each frame from ``seed``), last frame's silhouette edges and every border edge;
+      grow each silhouette edge found along the contour (test the edges at its vertices) until the
+      chains close. No history on the first frame: the random fraction alone, as in the paper. Loops
+      missed by every sample are lost until a later sample hits them (the paper trades accuracy for
+      speed); found edges are always real silhouette edges.
+
+    Where the work runs: tracking's ``walks="device"`` (the default) runs its tests and walks in
+    kernels (``track_previous``, ``seed_edges``, ``complete_loops``: one work-item per candidate, last
+    frame's edges kept on the device); ``walks="host"`` runs the same walks in NumPy, all walkers a
+    step at a time; both give the same edges (tested). The randomized method grows on the host in
+    NumPy rounds: its growth tests every edge at a chain's vertices, so it also finds loops that
+    touch a found one at a vertex (a device version growing by the loop walk instead lost 2-6 % of
+    the recall on the bunny and ogre, 60 frames at 3 degrees, fractions 0.02 and 0.1). On the host, faces are tested by :func:`host_facing` as the walks reach them,
+    except that a batch of at least ``device_batch`` new faces (default ``1000 + F / 20``, the
+    measured break-even) is done by one device pass over every face. Every facing, on host or device,
+    is the kernel's float32 arithmetic, so tracking and random never report an edge the brute force
+    would not (precision 1).
+
+    ``update(light)`` returns a :class:`Silhouette` (codes 0 for edges not found; ``facing`` computed
+    on use); ``stats`` describes the last update (``fallback``, ``stale``, ``lost_walks``,
+    ``faces_tested`` (None for device walks), ``edges_found``; ``rounds`` and ``sampled`` for random); ``reset()`` forgets the history. Tracking refuses non-manifold and inconsistently wound
+    meshes (its loop walk follows the winding), random non-manifold ones (``ValueError``); brute force
+    reports non-manifold edges with code :data:`NONMANIFOLD`.
+    """
+
+    def __init__(self, device, mesh_or_adjacency, method: str = "brute", fraction: float = 0.02, seed: int = 0,
+                 *, concave_angle: float = 0.0, max_walk: int = 16, max_stale: float = 0.5,
+                 max_lost: float = 0.5, device_batch: "int | None" = None, walks: str = "device"):
+        self.device = get_device(device)
+        adjacency = mesh_or_adjacency
+        if isinstance(adjacency, Mesh):
+            adjacency = edge_adjacency(adjacency)
+        elif not isinstance(adjacency, EdgeAdjacency):
+            raise TypeError(f"mesh_or_adjacency: expected a Mesh or an EdgeAdjacency, got {type(adjacency).__name__}")
+        if method not in TRACKER_METHODS:
+            raise ValueError(f"method: expected one of {TRACKER_METHODS}, got {method!r}")
+        if walks not in ("device", "host"):
+            raise ValueError(f"walks: expected 'device' or 'host', got {walks!r}")
+        self.walks = walks
+        fraction = positive_float("fraction", fraction)
+        if fraction > 1:
+            raise ValueError(f"fraction: must be at most 1, got {fraction!r}")
+        for name, share in (("max_stale", max_stale), ("max_lost", max_lost)):
+            if positive_float(name, share) > 1:
+                raise ValueError(f"{name}: must be at most 1, got {share!r}")
+        self.adjacency, self.method, self.fraction = adjacency, method, fraction
+        self.max_walk = positive_int("max_walk", max_walk)
+        self.max_stale, self.max_lost = float(max_stale), float(max_lost)
+        # Measured on PoCL (bench/silhouettes.py): host_facing ~0.08 us a face; one device pass ~0.085 ms
+        # + ~4 ns a face with its read-back. Break-even: ~1000 + F / 20 faces.
+        self.device_batch = (1000 + len(adjacency.faces) // 20 if device_batch is None
+                             else positive_int("device_batch", device_batch))
+        self.concave_angle = non_negative_float("concave_angle", concave_angle)
+        self._seed = positive_int("seed", seed, minimum=0)
+        self.stats: dict = {}
+        self._on_device, self._previous = None, None
+        if method == "brute":
+            return
+        if method == "tracking" or len(adjacency.nonmanifold_edges):
+            adjacency.require_manifold(f"SilhouetteTracker(method={method!r}): mesh")
+        self.halves = HalfEdges.build(adjacency)
+        nfaces, nedges = len(adjacency.faces), len(adjacency.edges)
+        # Per-frame caches stamped with the frame number (no clearing); index -1 is the missing face.
+        self._face_stamp = np.zeros(nfaces + 1, dtype=np.int64)
+        self._face_lit = np.zeros(nfaces + 1, dtype=bool)
+        self._edge_stamp = np.zeros(nedges, dtype=np.int64)
+        # Scratch for _distinct.
+        self._face_slot = np.zeros(nfaces + 1, dtype=np.int64)
+        self._edge_slot = np.zeros(nedges, dtype=np.int64)
+        self._vertex_slot = np.zeros(len(adjacency.vertices), dtype=np.int64)
+        self._frame = 0
+        self._concave = self._concave_edges() if method == "tracking" else np.zeros(0, np.int64)
+        self._on_device = _DeviceWalks(self) if method == "tracking" and walks == "device" else None
+        self.reset()
+
+    @property
+    def concave_edges(self) -> np.ndarray:
+        """Edges tracking tests every frame for new loops (dihedral >= 180 + ``concave_angle`` degrees)."""
+        return self._concave
+
+    def reset(self) -> None:
+        """Forget the previous frame: the next update starts as a first frame."""
+        self._previous = None                    # last frame's silhouettes as light-facing half-edges
+        if self.method == "random":
+            self._rng = np.random.default_rng(self._seed)
+        if self._on_device:
+            self._on_device.set_previous(np.zeros(0, np.int64))
+
+    def update(self, light) -> Silhouette:
+        """The silhouette against ``light`` (a PointLight or DirectionalLight), using the history."""
+        light = check_light(light)
+        if self.method == "brute":
+            self.stats = {"method": "brute", "fallback": False, "faces_tested": len(self.adjacency.faces)}
+            return silhouette_edges(self.device, self.adjacency, light)
+        self._frame += 1
+        self._face_stamp[-1] = self._frame          # the missing face: known, not light-facing
+        self._light, self._tested, self.stats = light, 0, {}
+        fallback = False
+        if self.method == "random":
+            found = self._random_frame()
+        elif self._previous is None:
+            found = None
+        else:
+            found = self._on_device.frame() if self._on_device else self._tracking_frame()
+            fallback = found is None
+        if found is None:                            # first tracking frame, or a detected jump
+            silhouette = silhouette_edges(self.device, self.adjacency, light)
+            self._previous = self._lit_halves(silhouette)
+            if self._on_device:
+                self._on_device.set_previous(self._previous)
+            self.stats.update(method=self.method, fallback=fallback, faces_tested=len(self.adjacency.faces),
+                              edges_found=len(self._previous))
+            return silhouette
+        self._previous = found
+        codes = np.zeros(len(self.adjacency.edges), dtype=np.int8)
+        h = self.halves
+        codes[h.edge[found]] = np.where(h.tails[found] < h.heads[found], 1, -1)
+        self.stats.update(method=self.method, fallback=False, edges_found=len(found),
+                          faces_tested=None if self._on_device else self._tested)
+        return Silhouette(self.adjacency, light, codes, device=self.device)
+
+    # Shared pieces ----------------------------------------------------------------------------------
+    def _lit(self, faces: np.ndarray, batch: bool = False) -> np.ndarray:
+        """Facing of ``faces`` (-1: the missing face, never light-facing), each face tested once a frame:
+        on the host, or for a ``batch`` of at least ``device_batch`` new faces by one device pass over
+        every face (its launch and read-back cost as much as ~1000 + F / 20 faces on the host)."""
+        unknown = _distinct(faces[self._face_stamp[faces] != self._frame], self._face_slot)
+        if batch and len(unknown) >= self.device_batch:
+            facing_g, _ = _facing_on_device(self.device, self.adjacency, self._light)
+            self._face_lit[:-1] = self.device.from_device(facing_g, len(self._face_lit) - 1, np.uint8).view(bool)
+            self._face_stamp[:] = self._frame
+            self._tested += len(self._face_lit) - 1
+        elif len(unknown):
+            self._face_lit[unknown] = host_facing(self.adjacency.vertices, self.adjacency.faces, self._light, unknown)
+            self._face_stamp[unknown] = self._frame
+            self._tested += len(unknown)
+        return self._face_lit[faces]
+
+    def _test_edges(self, edges: np.ndarray, batch: bool = False) -> np.ndarray:
+        """The light-facing half-edges of the silhouettes among ``edges``, marked as tested."""
+        self._edge_stamp[edges] = self._frame
+        first, second = self.halves.edge_halves[edges].T
+        lit = self._lit(np.r_[first, second] // 3, batch)
+        lit0, lit1 = lit[:len(edges)], lit[len(edges):]
+        return np.where(lit0, first, second)[lit0 != lit1]
+
+    def _lit_halves(self, silhouette: Silhouette) -> np.ndarray:
+        """The light-facing half-edge of every silhouette edge of a brute-force ``silhouette``."""
+        index = silhouette.indices
+        first, second = self.halves.edge_halves[index].T
+        runs_up = self.halves.tails[first] < self.halves.heads[first]
+        return np.where(runs_up == (silhouette.codes[index] > 0), first, second)
+
+    def _concave_edges(self) -> np.ndarray:
+        """Two-face edges folding inwards by at least ``concave_angle`` degrees (dihedral >= 180 + angle)."""
+        h = self.halves
+        pairs = h.edge_halves[h.edge_halves[:, 1] >= 0]
+        vertices = self.adjacency.vertices.astype(np.float64)
+        tri = vertices[self.adjacency.faces]
+        normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+        f0, f1 = pairs[:, 0] // 3, pairs[:, 1] // 3
+        apex1 = self.adjacency.faces[f1, (pairs[:, 1] % 3 + 2) % 3]     # f1's corner off the edge
+        inwards = np.einsum("ij,ij->i", normal[f0], vertices[apex1] - tri[f0, 0]) > 0
+        bend = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", normal[f0], normal[f1]), -1, 1)))
+        return h.edge[pairs[inwards & (bend >= self.concave_angle), 0]]
+
+    # Tracking ---------------------------------------------------------------------------------------
+    def _tracking_frame(self) -> "np.ndarray | None":
+        h, previous = self.halves, self._previous
+        twin = h.twin[previous]
+        extra = np.r_[self.adjacency.border_edges, self._concave]
+        self._lit(np.r_[previous, twin, h.edge_halves[extra].reshape(-1)] // 3, batch=True)
+        lit_here, lit_there = self._lit(previous // 3), self._lit(twin // 3)
+        seeds = [previous[lit_here & ~lit_there], twin[~lit_here & lit_there]]
+        away, into = lit_here & lit_there, ~lit_here & ~lit_there
+        stale = float(np.mean(away | into)) if len(previous) else 0.0
+        self.stats["stale"] = stale
+        if stale > self.max_stale:
+            return None
+        # III.B: walk from the face that turned, away from the other one.
+        starts = np.r_[twin[away], previous[into]]
+        walked, lost = self._find_edges_by_walk(starts // 3, starts % 3, np.r_[np.ones(away.sum(), bool),
+                                                                               np.zeros(into.sum(), bool)])
+        self.stats["lost_walks"] = lost
+        if len(starts) and lost > self.max_lost * len(starts):
+            return None
+        seeds = np.concatenate(seeds + [walked, self._test_edges(extra)])
+        found = self._complete_loops(seeds)
+        if len(found) < (1 - self.max_stale) * len(previous):
+            return None
+        return found
+
+    def _find_edges_by_walk(self, faces, back, lit_walk):
+        """Section III.B's ``find_edge_by_walk`` for many walkers at once. Walker i stands on
+        ``faces[i]``, entered through its edge ``back[i]``; a light-facing walk (``lit_walk``) crosses
+        light-facing faces until a left or right neighbour faces away (or is missing), the other walk
+        crosses faces facing away until a neighbour faces the light. Steps go left and right in turn; a
+        missing neighbour is a wall. Returns (light-facing half-edges of the silhouettes found, number
+        of walkers lost: out of steps or walled in)."""
+        twin, found, lost = self.halves.twin, [], 0
+        step_left = np.ones(len(faces), dtype=bool)
+        for _ in range(self.max_walk):
+            if not len(faces):
+                break
+            left, right = 3 * faces + (back + 1) % 3, 3 * faces + (back + 2) % 3
+            left_twin, right_twin = twin[left], twin[right]
+            lit_left, lit_right = self._lit(left_twin // 3), self._lit(right_twin // 3)
+            hit_left = np.where(lit_walk, ~lit_left, lit_left)
+            hit_right = np.where(lit_walk, ~lit_right, lit_right)
+            done = hit_left | hit_right
+            found.append(np.where(hit_left, np.where(lit_walk, left, left_twin),
+                                  np.where(lit_walk, right, right_twin))[done])
+            go_left = np.where(step_left, left_twin >= 0, right_twin < 0)
+            walled = (left_twin < 0) & (right_twin < 0) & ~done
+            lost += int(walled.sum())
+            going = ~done & ~walled
+            step = np.where(go_left, left_twin, right_twin)[going]
+            faces, back, lit_walk, step_left = step // 3, step % 3, lit_walk[going], ~step_left[going]
+        return np.concatenate(found + [np.zeros(0, np.int64)]), lost + len(faces)
+
+    def _complete_loops(self, seeds: np.ndarray) -> np.ndarray:
+        """Section III.C: from each seed (a light-facing half-edge of a silhouette edge) turn around its
+        tail vertex through light-facing faces; the first edge whose other face faces away (or is
+        missing) is the next silhouette edge, whose other vertex is turned around next; stop at an
+        edge already found. All walkers step together; returns every loop edge's light-facing half."""
+        h = self.halves
+        seeds = seeds[_distinct(h.edge[seeds], self._edge_slot, positions=True)]
+        self._edge_stamp[h.edge[seeds]] = self._frame
+        found, current, pivot = [seeds], seeds, h.tails[seeds]
+        for _ in range(6 * len(h.edge_halves) + 6):      # a loop's faces are each entered at most thrice
+            if not len(current):
+                break
+            faces, k = current // 3, current % 3
+            # The other edge of this face at the pivot: it ends there or starts there.
+            side = 3 * faces + np.where(h.tails[current] == pivot, (k + 2) % 3, (k + 1) % 3)
+            across = h.twin[side]
+            turn = self._lit(across // 3)
+            edge = h.edge[side]
+            new = ~turn & (self._edge_stamp[edge] != self._frame)
+            self._edge_stamp[edge[new]] = self._frame
+            found.append(side[new])
+            far = np.where(h.tails[side] == pivot, h.heads[side], h.tails[side])
+            current = np.r_[across[turn], side[new]]
+            pivot = np.r_[pivot[turn], far[new]]
+        else:
+            raise RuntimeError("silhouette loop completion did not end (an inconsistent adjacency table)")
+        return np.concatenate(found)
+
+    # Randomized -------------------------------------------------------------------------------------
+    def _sample(self) -> np.ndarray:
+        """This frame's random ``fraction`` of the edges (with repeats)."""
+        nedges = len(self.adjacency.edges)
+        size = int(np.ceil(self.fraction * nedges))
+        return self._rng.integers(0, nedges, size=size) if nedges else np.zeros(0, np.int64)
+
+    def _random_frame(self) -> np.ndarray:
+        sample = self._sample()
+        previous = self.halves.edge[self._previous] if self._previous is not None else np.zeros(0, np.int64)
+        candidates = _distinct(np.r_[previous, sample, self.adjacency.border_edges], self._edge_slot)
+        frontier = self._test_edges(candidates, batch=True)
+        found, rounds = [frontier], 0
+        while len(frontier):                              # grow along the contour until the chains close
+            rounds += 1
+            ends = _distinct(self.adjacency.edges[self.halves.edge[frontier]].reshape(-1), self._vertex_slot)
+            near = self.halves.edges_at(ends)
+            near = _distinct(near[self._edge_stamp[near] != self._frame], self._edge_slot)
+            frontier = self._test_edges(near)
+            found.append(frontier)
+        self.stats.update(rounds=rounds, sampled=len(sample))
+        return np.concatenate(found)
+
+
+def _distinct(items: np.ndarray, slot: np.ndarray, positions: bool = False) -> np.ndarray:
+    """``items`` without repeats (in no particular order), or the ``positions`` of one of each, in
+    linear time: ``slot`` (scratch, one entry per possible item) keeps the last position that wrote
+    it. np.unique sorts or hashes, ~10x slower on these sizes."""
+    where = np.arange(len(items))
+    slot[items] = where
+    kept = where[slot[items] == where]
+    return kept if positions else items[kept]
+
+
+class _DeviceWalks:
+    """Tracking's walks on the device (kernels/silhouette.cl: track_previous, seed_edges,
+    complete_loops): the same seeds, walks and loops as the host's ``_tracking_frame``, one work-item
+    per candidate, last frame's edges kept on the device between frames."""
+
+    def __init__(self, tracker: SilhouetteTracker):
+        self.tracker = tracker
+        device, adjacency, halves = tracker.device, tracker.adjacency, tracker.halves
+        self.capacity = max(len(adjacency.edges), 1)       # every edge is appended at most once a frame
+        listed = halves.edge_halves[np.r_[adjacency.border_edges, tracker.concave_edges], 0]
+        self.nlisted = len(listed)
+        self.twin_g, self.edge_g, self.listed_g = (device.to_device(a.astype(np.int32))
+                                                    for a in (halves.twin, halves.edge, listed))
+        self.claim_g = _writable(device, np.zeros(self.capacity, np.int32), "claims")
+        self.found_g = [device.empty(4 * self.capacity, "tracked edges") for _ in range(2)]
+        self.seeds_g = device.empty(4 * (self.capacity + self.nlisted), "tracking seeds")
+        self.counters_g = device.empty(4 * 5, "tracking counters")
+        self.stamp, self.nprevious = 0, 0
+        self.options = (f"-DMAX_WALK={tracker.max_walk}",)
+
+    def set_previous(self, previous: np.ndarray) -> None:
+        """Upload last frame's light-facing half-edges (after a brute-force frame; none after a reset)."""
+        if len(previous):
+            cl.enqueue_copy(self.tracker.device.queue, self.found_g[0], previous.astype(np.int32))
+        self.nprevious = len(previous)
+
+    def frame(self) -> "np.ndarray | None":
+        """This frame's light-facing silhouette half-edges, or None to fall back (the host's rules)."""
+        tracker, device = self.tracker, self.tracker.device
+        light, queue = tracker._light, device.queue
+        point = isinstance(light, PointLight)
+        vector = [np.float32(c) for c in (light.position if point else light.direction)]
+        options = (f"-DLIGHT_POINT={int(point)}",) + self.options
+        vertices_g, faces_g, _, _ = tracker.adjacency.device_buffers(device)
+        cl.enqueue_fill_buffer(queue, self.counters_g, np.int32(0), 0, 4 * 5)
+        device.kernel("silhouette.cl", "track_previous", options)(
+            queue, _global_size(self.nprevious), None, vertices_g, faces_g, self.twin_g, self.found_g[0],
+            np.int32(self.nprevious), *vector, self.seeds_g, self.counters_g)
+        device.kernel("silhouette.cl", "seed_edges", options)(
+            queue, _global_size(self.nlisted), None, vertices_g, faces_g, self.twin_g, self.listed_g,
+            np.int32(self.nlisted), *vector, self.seeds_g, self.counters_g)
+        _, stale, lost, _, nseeds = device.from_device(self.counters_g, 5, np.int32).tolist()
+        tracker.stats.update(stale=stale / max(self.nprevious, 1), lost_walks=lost)
+        if stale > tracker.max_stale * self.nprevious or lost > tracker.max_lost * stale:
+            return None
+        self.stamp += 1
+        found_g = self.found_g[1]
+        device.kernel("silhouette.cl", "complete_loops", options)(
+            queue, _global_size(nseeds), None, vertices_g, faces_g, self.twin_g, self.edge_g, self.seeds_g,
+            np.int32(nseeds), *vector, np.int32(self.stamp), self.claim_g, found_g, np.int32(self.capacity),
+            np.int32(6 * self.capacity + 6), self.counters_g)
+        count, _, _, unclosed, _ = device.from_device(self.counters_g, 5, np.int32).tolist()
+        if count > self.capacity or unclosed:
+            raise RuntimeError(f"complete_loops: {count} edges for {self.capacity} slots, {unclosed} unclosed walks "
+                               "(an inconsistent adjacency table)")
+        if count < (1 - tracker.max_stale) * self.nprevious:
+            return None
+        self.found_g.reverse()                            # this frame's edges are the next frame's previous
+        self.nprevious = count
+        return device.from_device(found_g, count, np.int32).astype(np.int64)
+
+
+def _writable(device, array: np.ndarray, what: str):
+    """A read-write device buffer holding ``array``."""
+    buffer = device.empty(array.nbytes, what)
+    cl.enqueue_copy(device.queue, buffer, array)
+    return buffer
+
+
+def _global_size(n: int, group: int = 64) -> tuple:
+    """A 1-D global size of at least ``n`` work-items (kernels guard the excess), a multiple of ``group``:
+    PoCL otherwise picks a work-group size that divides ``n`` (1 for a prime ``n``), one task each."""
+    return (max(-(-n // group), 1) * group,)

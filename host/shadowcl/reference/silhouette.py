@@ -90,3 +90,14 @@ def classify(vertices, faces, light, table: dict | None = None) -> dict:
         if len(lit) == 1:
             oriented.add(lit[0])
     return {"oriented": oriented, "nonmanifold": nonmanifold, "facing": facing}
+
+
+def recall_precision(codes, truth_codes) -> tuple[float, float]:
+    """(recall, precision) of the silhouette edges in ``codes`` against ``truth_codes`` (per-edge codes,
+    +1/-1 silhouettes of either orientation). An edge counts as found only with the right orientation.
+    Recall of an empty truth and precision of an empty answer are 1."""
+    codes, truth_codes = np.asarray(codes), np.asarray(truth_codes)
+    found, truth = np.abs(codes) == 1, np.abs(truth_codes) == 1
+    hits = np.count_nonzero(found & truth & (codes == truth_codes))
+    return (hits / np.count_nonzero(truth) if truth.any() else 1.0,
+            hits / np.count_nonzero(found) if found.any() else 1.0)
