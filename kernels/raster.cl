@@ -5,6 +5,8 @@
  *   raster_depth      per triangle: nearest depth of every pixel (atomic_max on the float's bits)
  *   raster_triangle   per triangle: smallest triangle id among the fragments at the stored depth
  *   raster_count      per triangle: how many fragments each pixel received (overdraw, for tests)
+ *   raster_stencil    per triangle: shadow-volume stencil, +-1 per fragment by screen winding where
+ *                     the fragment passes the depth test against a Z-buffer (z-pass or z-fail)
  *   raster_receivers  per covered pixel: surface point and viewer-facing normal seen through it
  *
  * Conventions (host/shadowcl/views.py): clip = matrix * (relative position, 1); depth = z / w in
@@ -20,6 +22,8 @@
  *                  functions (a difference of two products of differences) below 2^61 in a long
  *   MAX_CORNERS    corners of a triangle clipped by the six planes (3 + one per plane)
  *   BIG_BOX        pixels in a triangle's bounding box above which several work-items draw it
+ *   STENCIL_ZFAIL  raster_stencil only: 1 counts fragments behind the Z-buffer (z-fail), 0 in front
+ *                  of it (z-pass)
  */
 
 /* INLINE, dot3 and SC_ABS, SC_MIN, SC_SQRT: math that PoCL inlines */
@@ -193,7 +197,11 @@ kernel void raster_setup(global const float *vertices, global const int *faces, 
 /* Rasterization                                                                                   */
 /* ---------------------------------------------------------------------------------------------- */
 
-enum pass { DEPTH_PASS, TRIANGLE_PASS, COUNT_PASS };
+enum pass { DEPTH_PASS, TRIANGLE_PASS, COUNT_PASS, STENCIL_PASS };
+
+#ifndef STENCIL_ZFAIL
+#define STENCIL_ZFAIL 1
+#endif
 
 /* Edge function of edge a -> b at p: positive on the interior side of a positively ordered
  * triangle (y down: the interior is right of a -> b as seen on screen). Exact in 64 bits. */
@@ -216,8 +224,10 @@ INLINE bool precedes(const int2 a, const int2 b)
     return a.y < b.y || (a.y == b.y && a.x < b.x);
 }
 
-/* One fragment: what the pass does with it. */
-INLINE void shade(const enum pass pass, const int pixel, const float depth, const uint id,
+/* One fragment: what the pass does with it. winding is +1 when the triangle's corners run positively
+ * on screen (y down: clockwise as seen, so a triangle wound counter-clockwise around its outward
+ * normal shows its back), -1 otherwise. */
+INLINE void shade(const enum pass pass, const int pixel, const float depth, const uint id, const int winding,
                   global uint *target, global const uint *depth_bits)
 {
     switch (pass) {
@@ -230,6 +240,18 @@ INLINE void shade(const enum pass pass, const int pixel, const float depth, cons
         break;
     case COUNT_PASS:
         atomic_inc(target + pixel);
+        break;
+    case STENCIL_PASS:
+        /* Winding number of the surface point, seen as lying just in front of its own depth (a face
+         * at the same depth, bit for bit, counts as behind it). z-fail: faces behind the point, +1
+         * leaving the volume (back faces), -1 entering; z-pass: faces in front of it, +1 entering. */
+#if STENCIL_ZFAIL
+        if (as_uint(depth) <= depth_bits[pixel])
+            atomic_add(target + pixel, (uint)winding);
+#else
+        if (as_uint(depth) > depth_bits[pixel])
+            atomic_sub(target + pixel, (uint)winding);
+#endif
         break;
     }
 }
@@ -260,6 +282,7 @@ INLINE void draw_triangle(const enum pass pass, int2 a, int2 b, int2 c, float za
     long area = edge_function(a, b, c.x, c.y);
     if (area == 0)
         return;
+    const int winding = area > 0 ? 1 : -1;
     if (area < 0) {
         const int2 t = b; b = c; c = t;
         const float s = zb; zb = zc; zc = s;
@@ -299,7 +322,7 @@ INLINE void draw_triangle(const enum pass pass, int2 a, int2 b, int2 c, float za
             /* Weights are >= 0 inside, so the sum has no cancellation: a few ulp of the depth */
             const float depth = ((float)(row_a + j * dx_a) * za + (float)(row_b + j * dx_b) * zb +
                                  (float)(row_c + j * dx_c) * zc) * inv_area;
-            shade(pass, row * width + col, depth, id, target, depth_bits);
+            shade(pass, row * width + col, depth, id, winding, target, depth_bits);
         }
     }
 }
@@ -356,6 +379,16 @@ kernel void raster_triangle(RASTER_PASS_ARGS, global const uint *depth_bits, glo
 kernel void raster_count(RASTER_PASS_ARGS, global uint *count)
 {
     draw_polygon(COUNT_PASS, big, n, corner_count, corner_xy, corner_depth, width, height, count, count);
+}
+
+/* raster_stencil: the shadow-volume stencil of closed, consistently wound volumes (outward faces
+ * counter-clockwise). In: depth_bits, a Z-buffer of the receivers (raster_depth's output). In/out:
+ * stencil (H * W, two's-complement int32), set by the host before the first triangle; every fragment
+ * passing the depth test (STENCIL_ZFAIL) adds its winding, so a covered pixel ends with the winding
+ * number of its surface point (z-pass: counted from the eye's, which the host puts in first). */
+kernel void raster_stencil(RASTER_PASS_ARGS, global const uint *depth_bits, global uint *stencil)
+{
+    draw_polygon(STENCIL_PASS, big, n, corner_count, corner_xy, corner_depth, width, height, stencil, depth_bits);
 }
 
 /* ---------------------------------------------------------------------------------------------- */

@@ -42,6 +42,7 @@ from .lights import check_light
 METHODS = {
     "exact": "shadowcl.exact:ExactMethod",
     "shadow_map": "shadowcl.shadow_map:ShadowMapMethod",
+    "shadow_volume": "shadowcl.shadow_volume:ShadowVolumeMethod",
 }
 
 EPS_FRACTION = 1e-4  # default eps as a fraction of the scene's bounding-box diagonal (DESIGN.md)

@@ -17,6 +17,7 @@ Typical use::
     zbuffer = rasterize(device, mesh, view)
     found = receivers(device, mesh, view, zbuffer)   # world points and normals of covered pixels
     light = depth_map(device, mesh, light_view)      # depth only, left on the device (shadow maps)
+    count = stencil(device, volumes, view, zbuffer)  # shadow-volume stencil over the camera's surface
 """
 
 from __future__ import annotations
@@ -188,6 +189,43 @@ def coverage_count(device: Device, mesh: Mesh, view: View) -> np.ndarray:
     return device.from_device(count_dev, (view.height, view.width), np.uint32)
 
 
+def stencil(device: Device, volumes: Mesh, view: View, zbuffer: ZBuffer, zfail: bool = True,
+            initial: int = 0, surface: np.ndarray | None = None) -> np.ndarray:
+    """(H, W) int32: the shadow-volume stencil of the closed ``volumes`` over the surface in ``zbuffer``.
+
+    ``volumes`` are closed meshes whose faces wind counter-clockwise around their outward normals. Each
+    fragment of a volume face that passes the depth test against ``zbuffer`` adds its screen winding:
+    z-fail (``zfail=True``) counts the faces behind the visible surface (+1 leaving a volume, -1
+    entering), z-pass those in front of it (+1 entering, -1 leaving), starting from ``initial``, the
+    winding number of the eye. A face at exactly the surface's depth counts as behind it: the surface
+    point is taken as lying just on the viewer's side of itself. A covered pixel ends with the winding
+    number of its surface point, nonzero inside a volume. z-pass also needs the near plane to cut no
+    volume face (the caller checks); z-fail needs none of that. Same setup and fill rule as
+    :func:`rasterize`, so volume faces sharing an edge never both count a pixel nor both miss it.
+    ``surface``, if given, is an (H, W) float32 depth image (0 = empty, 1 = nearest) the fragments are
+    tested against instead of ``zbuffer.depth``, e.g. the receivers moved along their normals.
+    """
+    _check(volumes, view)
+    if not isinstance(zbuffer, ZBuffer):
+        raise TypeError(f"zbuffer: expected a ZBuffer from rasterize(), got {type(zbuffer).__name__}")
+    if not _same_view(zbuffer.view, view):
+        raise ValueError("zbuffer: was drawn with a different view")
+    depth_dev = zbuffer._depth_dev
+    if surface is not None:
+        surface = np.asarray(surface)
+        if surface.shape != (view.height, view.width) or surface.dtype != np.float32:
+            raise ValueError(f"surface: expected a ({view.height}, {view.width}) float32 depth image, "
+                             f"got {surface.shape} {surface.dtype}")
+        if not np.all((surface >= 0) & (surface <= 1)):
+            raise ValueError("surface: depths must lie in [0, 1]")
+        depth_dev = device.to_device(np.ascontiguousarray(surface) + np.float32(0))   # + 0: no -0.0 bits
+    setup = _setup(device, volumes, view)
+    stencil_dev = _image(device, view, np.int32(initial).view(np.uint32), "stencil buffer")
+    launch = device.kernel(_FILE, "raster_stencil", _OPTIONS + (f"-DSTENCIL_ZFAIL={int(bool(zfail))}",))
+    _draw(device, launch, setup, view, depth_dev, stencil_dev)
+    return device.from_device(stencil_dev, (view.height, view.width), np.int32)
+
+
 def receivers(device: Device, mesh: Mesh, view: View, zbuffer: ZBuffer) -> Receivers:
     """The surface point and viewer-facing unit normal of every pixel covered in ``zbuffer``.
 
@@ -313,10 +351,11 @@ def _depth_pass(device: Device, setup: _Setup, view: View) -> DepthMap:
     return DepthMap(buffer, view, device)
 
 
-def _draw(device: Device, kernel: str, setup: _Setup, view: View, *images: cl.Buffer) -> None:
-    """Run raster pass ``kernel`` into ``images``: every triangle by one work-item, except big ones,
-    shared by BANDS work-items so that they spread over the compute units."""
-    launch = device.kernel(_FILE, kernel, _OPTIONS)
+def _draw(device: Device, kernel, setup: _Setup, view: View, *images: cl.Buffer) -> None:
+    """Run raster pass ``kernel`` (a name built with the common options, or a built kernel) into
+    ``images``: every triangle by one work-item, except big ones, shared by BANDS work-items so that
+    they spread over the compute units."""
+    launch = device.kernel(_FILE, kernel, _OPTIONS) if isinstance(kernel, str) else kernel
     for n, bands, local in ((setup.triangles, 1, (_GROUP, 1)), (setup.big_count, BANDS, (1, _BAND_GROUP))):
         if n:
             launch(
