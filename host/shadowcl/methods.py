@@ -43,6 +43,7 @@ METHODS = {
     "exact": "shadowcl.exact:ExactMethod",
     "shadow_map": "shadowcl.shadow_map:ShadowMapMethod",
     "shadow_volume": "shadowcl.shadow_volume:ShadowVolumeMethod",
+    "voxel": "shadowcl.voxel:VoxelMethod",
 }
 
 EPS_FRACTION = 1e-4  # default eps as a fraction of the scene's bounding-box diagonal (DESIGN.md)

@@ -1,0 +1,351 @@
+"""The "voxel" method: Lai & Cheng's shadows for Catmull-Clark subdivision surfaces (sections 3-5).
+
+prepare: voxelize every subdivision surface of the scene into one cubic frame buffer
+(host/shadowcl/voxelize.py), then decide for every *sample* (a leaf subpatch's corner, a point of the
+limit surface with its normal) whether it is lit, and store the states in the frame buffer (0 empty,
+1 lit, 2 shadowed: section 5.2; a voxel with lit and shadowed samples is lit). classify: a point's
+state is its voxel's (when its own is empty, the nearest occupied voxel within 2 voxels, nearest by
+offset; farther points are called lit, counted in ``stats["unplaced"]`` and warned about).
+
+Determination (``determination``):
+
+- ``"topology"`` (section 4.2): the leaves' corner quads are binned by their projection onto the
+  light's view, cells of about a voxel (:func:`projection_side`), with THE light-space list module (lightspace.ListBuilder,
+  4-corner primitives), each cell's list sorted nearest the light first (kernels/voxel.cl
+  sort_lists); a sample is shadowed when its ray to the light hits one of the two triangles (Badouel's
+  5-dot-product test, kernels/ray_triangle.h) of a listed leaf that is not *near* it: a leaf with a
+  corner voxel within one voxel of the sample's voxel (its own leaf and the leaves around it, which the
+  voxelization cannot tell from its own surface: the paper's "not its own or adjacent").
+- ``"offset"`` (section 4.1): the projection plane keeps the nearest sample distance per cell; the
+  sample A moves sqrt(2) r along its normal to A', A' is projected along the beam through A, and A is
+  shadowed when A' is farther from the light than its cell's nearest sample. No bias: the paper's rule
+  as written (its self-shadow error is what the bench measures).
+
+Both call a sample whose normal faces away from the light shadowed (N . (L - A) <= 0: the paper's
+"definitely in shadow", and DESIGN.md's meaning with normals). Normals are du x dv of the patches:
+outward for counter-clockwise control faces (host/shadowcl/subdivision.py).
+
+Frame buffer or not (``frame_buffer``): with it (section 5.2) prepare runs everything once and
+classify only reads the states, so another view of the same light costs a lookup; without it
+(section 5.1, automatic when the 2-bit buffer does not fit one device buffer) prepare keeps nothing and
+every classify voxelizes and determines again, which is what the paper says that mode costs.
+
+Scenes: only subdivision surfaces are voxelized (``scene.surfaces``; the ground too must be one). A
+scene with plain triangle objects is refused with a ValueError naming them (the voxel method cannot
+see triangles; use the exact or shadow_map method there) rather than missing their shadows.
+
+Measured (bench/results/voxel.md: four scenes, 100 k receivers, against exact on a finer tessellation;
+2 shared cores): at 256^3 the topology rule is wrong on 0.27-0.50 % of receivers, the offset rule on
+0.77-1.78 %; self-shadow error (each surface alone) topology 0.23 % / 0.37 % against offset 1.31 % /
+1.31 % on the concave toroidal_tet / suzanne, a tie on the convex cube and torus; with the frame buffer
+a second view of the same light classifies 6-19x faster than recomputing (section 5.1).
+
+Shading (:meth:`VoxelMethod.visibility`, section 5): a point takes the leaf subpatch with a corner in
+its voxel; with n of its four corner voxels shadowed the reflection is scaled by 1/2^n (0 for n = 4).
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+
+import numpy as np
+import pyopencl as cl
+
+from . import lightspace
+from . import voxelize as vz
+from .checks import check_bounds, positive_int
+from .lights import PointLight, check_light
+from .methods import check_points
+
+DETERMINATIONS = ("topology", "offset")
+DOT5_FLOATS = 16                 # kernels/ray_triangle.h
+DEFAULT_VOXELS_ACROSS_RECEIVERS = 256   # the paper's "acceptable" resolution, across the receivers' box
+MIN_RESOLUTION, MAX_AUTO_RESOLUTION = 64, 1024
+SEARCH = 2                       # voxels: how far classify looks for an occupied voxel around a point
+NEIGHBOURS = np.array(sorted(((a, b, c) for a in range(-SEARCH, SEARCH + 1) for b in range(-SEARCH, SEARCH + 1)
+                              for c in range(-SEARCH, SEARCH + 1) if (a, b, c) != (0, 0, 0)),
+                             key=lambda o: (max(map(abs, o)), sum(x * x for x in o))))   # ring 1 (26) first
+
+
+def scene_patches(device, scene_or_surface):
+    """The patch table of everything the method voxelizes, refusing triangle objects (see module doc)."""
+    surfaces = getattr(scene_or_surface, "surfaces", None)
+    if surfaces is not None and hasattr(scene_or_surface, "objects"):
+        names = {name for name, _ in surfaces}
+        plain = [name for name, _ in scene_or_surface.objects if name not in names]
+        if plain:
+            raise ValueError(f"scene: the voxel method only sees subdivision surfaces; objects {plain} are "
+                             "triangle meshes (use method 'exact' or 'shadow_map' for them)")
+        if not surfaces:
+            raise ValueError("scene: no subdivision surfaces to voxelize")
+        return vz.merge_tables([surface.patch_table(device) for _, surface in surfaces])
+    return vz.patch_table_of(device, scene_or_surface)
+
+
+class VoxelMethod:
+    """Lai & Cheng's voxel-based shadows (module docstring). After :meth:`prepare`, :attr:`stats` holds
+    the voxelization (leaves, levels, subpatches, bytes), list entries and each stage's time in seconds
+    (``lists_s``: the light-space lists for topology, the depth plane for offset); :attr:`vox` is the
+    :class:`~shadowcl.voxelize.Voxelization`, :attr:`sample_states` the per-sample states (1 lit, 2
+    shadowed; sample s is corner s % 4 of leaf s // 4), :attr:`grid` the projection plane and, for
+    topology, :attr:`lists` its light-space lists of leaves."""
+
+    name = "voxel"
+    scene_input = True
+    parameters = {
+        "resolution": (None, "voxels per side of the cubic frame buffer (<= 1024); None: 256 across the "
+                             "receivers' box, clamped to 64..1024"),
+        "determination": ("topology", "'topology' (section 4.2: listed subpatches, dot5 ray test) or 'offset' "
+                                      "(section 4.1: sqrt(2) voxel offset along the normal, nearest depth)"),
+        "connectivity": (26, "N-adjacency of a leaf subpatch's corner voxels: 6, 18 or 26"),
+        "frame_buffer": (None, "True: keep states in a 2-bit cubic frame buffer (section 5.2); False: "
+                               "recompute per classify (5.1); None: True when it fits the device"),
+        "grid_bounds": (None, "(2, 3) world box the cubic grid spans (must hold every control point); None: "
+                              "the control points' box"),
+    }
+
+    def __init__(self, device, resolution=None, determination="topology", connectivity=26, frame_buffer=None,
+                 grid_bounds=None):
+        self.device = device
+        if resolution is not None:
+            resolution = positive_int("resolution", resolution, 1, vz.MAX_RESOLUTION)
+        if determination not in DETERMINATIONS:
+            raise ValueError(f"determination: expected one of {DETERMINATIONS}, got {determination!r}")
+        if connectivity not in vz.CONNECTIVITIES:
+            raise ValueError(f"connectivity: expected one of {vz.CONNECTIVITIES}, got {connectivity!r}")
+        if frame_buffer not in (None, True, False):
+            raise TypeError(f"frame_buffer: expected None, True or False, got {frame_buffer!r}")
+        self.resolution, self.determination = resolution, determination
+        self.connectivity, self.frame_buffer = connectivity, frame_buffer
+        self.grid_bounds = None if grid_bounds is None else check_bounds("grid_bounds", grid_bounds)
+        self._builder = lightspace.ListBuilder(device, corners=4)
+        self._prepared = False
+        self.stats: dict = {}
+
+    def __repr__(self) -> str:
+        return (f"VoxelMethod(resolution={self.resolution}, determination={self.determination!r}, "
+                f"connectivity={self.connectivity})")
+
+    # prepare -------------------------------------------------------------------------------------------
+    def prepare(self, scene_or_surface, light, receiver_bounds, eps: float) -> None:
+        """Voxelize the subdivision surfaces of ``scene_or_surface`` (a Scene, a SubdivisionSurface or a
+        patch table) and, with a frame buffer, determine every voxel's state for ``light``."""
+        light = check_light(light)
+        box = check_bounds("receiver_bounds", receiver_bounds)
+        table = scene_patches(self.device, scene_or_surface)
+        points, _, _ = vz.check_table(table)
+        resolution = self.resolution or self._auto_resolution(points, box)
+        frame_bytes = 4 * vz.frame_word_count(resolution)
+        frame_buffer = self.frame_buffer if self.frame_buffer is not None else frame_bytes <= self.device.max_alloc_bytes
+        self.table, self.light, self.eps = table, light, float(eps)
+        self.light_vec = (np.asarray(light.position if isinstance(light, PointLight) else light.direction,
+                                     dtype=np.float32))
+        self.resolution_used, self.frame_buffer_used = resolution, bool(frame_buffer)
+        self.stats = {}
+        self._prepared = True
+        self._leaf_of_voxel = None
+        if frame_buffer:
+            self._run()
+
+    def _auto_resolution(self, points: np.ndarray, box: np.ndarray) -> int:
+        lo, hi = (points.min(axis=0), points.max(axis=0)) if self.grid_bounds is None else self.grid_bounds
+        extent = float(np.max(hi - lo))
+        across = float(np.max(box[1] - box[0]))
+        if across <= 0:
+            return DEFAULT_VOXELS_ACROSS_RECEIVERS
+        wanted = DEFAULT_VOXELS_ACROSS_RECEIVERS * extent / across
+        return int(np.clip(round(wanted), MIN_RESOLUTION, MAX_AUTO_RESOLUTION))
+
+    def _run(self) -> None:
+        """Voxelize, determine every sample's state and write the voxel states (the whole of section 3-4)."""
+        dev, queue = self.device, self.device.queue
+        t0 = time.perf_counter()
+        vox = vz.voxelize(dev, self.table, self.resolution_used, self.connectivity, frame_buffer=self.frame_buffer_used,
+                          grid_bounds=self.grid_bounds)
+        t1 = time.perf_counter()
+        n = vox.nleaves
+        nsamples = 4 * n
+        table_dev = [dev.to_device(a) for a in (np.ascontiguousarray(self.table.points, np.float32),
+                                                np.ascontiguousarray(self.table.first, np.uint32),
+                                                np.ascontiguousarray(self.table.levels, np.uint32))]
+        options = (f"-DLIGHT_POINT={int(isinstance(self.light, PointLight))}",)
+        quads = dev.empty(48 * n, "leaf quads")
+        tris = dev.empty(72 * n, "leaf triangles")
+        normals = dev.empty(48 * n, "sample normals")
+        keys = dev.empty(4 * n, "leaf keys")
+        packed = dev.empty(16 * n, "packed corner voxels")
+        lx, ly, lz = (np.float32(c) for c in self.light_vec)
+        # The paper's projection plane: views over the voxel grid's box, cells of about a voxel
+        lo = vox.origin
+        hi = vox.origin + vox.voxel_size * vox.resolution
+        views = lightspace.fit_views(self.light, np.stack([lo, hi]), np.zeros(3), float(np.linalg.norm(hi - lo)))
+        grid = lightspace.make_grid(views, resolution=projection_side(views, vox))
+        options = options + grid.options
+
+        def kernel(name):
+            return dev.kernel("voxel.cl", name, options)
+
+        kernel("leaf_geometry")(queue, (max(n, 1),), None, vox.leaves_dev, np.int32(n), *table_dev, lx, ly, lz,
+                                np.int32(vox.resolution), quads, tris, normals, keys, packed)
+        views_dev = dev.to_device(grid.params)
+        states = dev.empty(max(nsamples, 1), "sample states")
+        queue.finish()
+        t2 = time.perf_counter()
+        stats = dict(vox.stats)
+        if self.determination == "topology":
+            lists = self._builder.build(grid, quads, n)
+            t3 = time.perf_counter()
+            kernel("sort_lists")(queue, (grid.cells,), None, lists.offsets, lists.items, np.int32(grid.cells), keys)
+            dot5 = dev.empty(4 * DOT5_FLOATS * 2 * n, "leaf dot5 records")
+            dev.kernel("exact.cl", "dot5_records")(queue, (max(2 * n, 1),), None, tris, np.int32(2 * n), dot5)
+            queue.finish()
+            t4 = time.perf_counter()
+            kernel("topology_shadow")(queue, (max(nsamples, 1),), None, vox.leaves_dev, np.int32(nsamples), normals,
+                                      packed, dot5, views_dev, lists.offsets, lists.items, lx, ly, lz, states)
+            self.lists = lists
+            stats.update(list_entries=lists.entries, cells=grid.cells, lists_s=t3 - t2, sort_s=t4 - t3,
+                         list_bytes=4 * (lists.entries + grid.cells + 1), dot5_bytes=4 * DOT5_FLOATS * 2 * n)
+        else:
+            depth = dev.empty(4 * grid.fine_cells, "offset depth plane")
+            cl.enqueue_fill_buffer(queue, depth, np.int32(0x7F7FFFFF), 0, 4 * grid.fine_cells)
+            # directional light: distances along the beam can be negative; shift them positive
+            corners = lightspace.box_corners(np.stack([lo, hi]))
+            depth_offset = 0.0 if isinstance(self.light, PointLight) else float(-np.min(corners @ self.light_vec) + vox.voxel_size)
+            kernel("offset_depth")(queue, (max(nsamples, 1),), None, vox.leaves_dev, np.int32(nsamples), views_dev,
+                                   lx, ly, lz, np.float32(depth_offset), depth)
+            t4 = time.perf_counter()
+            kernel("offset_shadow")(queue, (max(nsamples, 1),), None, vox.leaves_dev, np.int32(nsamples), normals,
+                                    views_dev, lx, ly, lz, np.float32(depth_offset),
+                                    np.float32(np.sqrt(2.0) * vox.voxel_size), depth, states)
+            stats.update(cells=grid.fine_cells, lists_s=t4 - t2, sort_s=0.0, list_bytes=4 * grid.fine_cells)
+        sample_states = dev.from_device(states, nsamples, np.uint8)
+        t5 = time.perf_counter()
+        if np.any(sample_states == 3):
+            raise RuntimeError(f"voxel: {int(np.sum(sample_states == 3))} samples lie behind the light's view; "
+                               "this is a bug in the view fitting")
+        if vox.frame_dev is not None:
+            for phase in (0, 1):
+                kernel("write_states")(queue, (max(nsamples, 1),), None, vox.leaves_dev, np.int32(nsamples), states,
+                                       np.int32(phase), vox.frame_dev)
+            self._frame_words = vox.frame_words
+            self._sparse = None
+        else:
+            self._frame_words = None
+            self._sparse = sparse_states(vox.corner_voxels.ravel(), sample_states)
+        t6 = time.perf_counter()
+        stats.update(determination=self.determination, samples=nsamples, shadowed_samples=int(np.sum(sample_states == 2)),
+                     voxelize_s=t1 - t0, geometry_s=t2 - t1, determine_s=t5 - t4, states_s=t6 - t5,
+                     prepare_s=t6 - t0, device_bytes=int(stats["frame_bytes"] + stats["leaf_bytes"] + 192 * n
+                                                         + stats["list_bytes"] + stats.get("dot5_bytes", 0)))
+        self.vox, self.sample_states, self._normals_dev, self.grid = vox, sample_states, normals, grid
+        self.stats.update(stats)
+
+    @property
+    def sample_normals(self) -> np.ndarray:
+        """(S, 3) float32 unit normals of the samples (leaf corners in order), read from the device."""
+        return self.device.from_device(self._normals_dev, (4 * self.vox.nleaves, 3), np.float32)
+
+    # classify ------------------------------------------------------------------------------------------
+    def _states_of(self, ids: np.ndarray) -> np.ndarray:
+        """uint8 states (0 empty, 1 lit, 2 shadowed) of linear voxel ids."""
+        if self._frame_words is not None:
+            return ((self._frame_words[ids >> 4] >> (2 * (ids & 15)).astype(np.uint32)) & 3).astype(np.uint8)
+        keys, values = self._sparse
+        at = np.clip(np.searchsorted(keys, ids), 0, len(keys) - 1)
+        return np.where(keys[at] == ids, values[at], 0).astype(np.uint8)
+
+    def _locate(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(linear voxel id or -1, state) per point: its voxel, else the first occupied voxel within SEARCH
+        voxels, nearest offsets first (points of a tessellation lie off the limit surface by its chord error)."""
+        vox, R = self.vox, self.vox.resolution
+        ijk, _ = vox.voxel_of(points)
+        ids = np.full(len(points), -1, dtype=np.int64)
+        states = np.zeros(len(points), dtype=np.uint8)
+        inside = np.all((ijk >= 0) & (ijk < R), axis=1)
+        own = (ijk[:, 0] * R + ijk[:, 1]) * R + ijk[:, 2]
+        states[inside] = self._states_of(own[inside])
+        ids[inside & (states > 0)] = own[inside & (states > 0)]
+        # Empty voxel: the first occupied one in order of offset length (NEIGHBOURS is sorted), ring 1 first
+        for ring in (NEIGHBOURS[:26], NEIGHBOURS[26:]):
+            missing = np.flatnonzero(states == 0)
+            if not len(missing):
+                break
+            cand = ijk[missing, None, :] + ring[None]
+            ok = np.all((cand >= 0) & (cand < R), axis=2)
+            cid = (np.clip(cand[..., 0], 0, R - 1) * R + np.clip(cand[..., 1], 0, R - 1)) * R + np.clip(cand[..., 2], 0, R - 1)
+            cstate = np.where(ok, self._states_of(cid.ravel()).reshape(cid.shape), 0)
+            best = np.argmax(cstate > 0, axis=1)
+            rows = np.arange(len(missing))
+            found = cstate[rows, best] > 0
+            states[missing[found]] = cstate[rows[found], best[found]]
+            ids[missing[found]] = cid[rows[found], best[found]]
+        return ids, states
+
+    def _begin_classify(self, points, normals):
+        if not self._prepared:
+            raise RuntimeError("voxel: classify before prepare")
+        points, normals = check_points(points, normals)
+        if not self.frame_buffer_used:
+            self._run()                     # section 5.1: no frame buffer, so determine again
+        ids, states = self._locate(points)
+        unplaced = int(np.sum(ids < 0))
+        self.stats["unplaced"] = unplaced
+        if unplaced:
+            warnings.warn(f"voxel: {unplaced} of {len(points)} points are more than {SEARCH} voxels from every "
+                          "voxelized surface; they are classified lit", stacklevel=3)
+        backfacing = np.zeros(len(points), dtype=bool)
+        if normals is not None:
+            if isinstance(self.light, PointLight):
+                to_light = self.light.position - points
+            else:
+                to_light = -np.asarray(self.light.direction, dtype=np.float64)[None]
+            backfacing = np.einsum("ij,ij->i", normals, np.broadcast_to(to_light, points.shape)) <= 0
+        return ids, states, backfacing
+
+    def classify(self, points, normals=None) -> np.ndarray:
+        """bool (N,), True = in shadow: each point's voxel state (module docstring)."""
+        t0 = time.perf_counter()
+        _, states, backfacing = self._begin_classify(points, normals)
+        self.stats["classify_s"] = time.perf_counter() - t0
+        return (states == 2) | backfacing
+
+    def visibility(self, points, normals=None) -> np.ndarray:
+        """float32 (N,) share of the reflection: 1/2^n for n shadowed corner voxels of the leaf subpatch at
+        the point's voxel, 0 when all four are (section 5); 0 for back-facing normals."""
+        ids, states, backfacing = self._begin_classify(points, normals)
+        if self._leaf_of_voxel is None or not self.frame_buffer_used:
+            corner = self.vox.corner_voxels.ravel()
+            order = np.argsort(corner, kind="stable")
+            keys, first = np.unique(corner[order], return_index=True)
+            self._leaf_of_voxel = (keys, order[first] // 4)
+        keys, leaf_of = self._leaf_of_voxel
+        at = np.clip(np.searchsorted(keys, np.maximum(ids, 0)), 0, len(keys) - 1)
+        leaf = leaf_of[at]
+        shadowed = np.sum(self._states_of(self.vox.corner_voxels[leaf]) == 2, axis=1)
+        vis = np.where(shadowed >= 4, 0.0, 0.5 ** shadowed)
+        vis = np.where(ids < 0, 1.0, vis)
+        return np.where(backfacing, 0.0, vis).astype(np.float32)
+
+
+def projection_side(views, vox) -> int:
+    """Cells on the longer side of each light view so that a cell's footprint is about one voxel at the
+    voxel grid's centre (section 4: "very close to the resolution of the voxelization"; coarser cells
+    put several depth layers of a grazing surface in one cell, which the offset rule reads as shadow),
+    at most 2 R (memory) and at least 16. Measured on the bench's lit ground plane under a point light
+    at 64^3: R cells across the window (about 2.5 voxels per cell) made the offset rule call 8-37 % of
+    the plane shadowed; voxel-sized cells 0-0.4 % (bench/results/voxel.md, Figure 1)."""
+    width = float(np.max(np.maximum(views.windows[:, 1] - views.windows[:, 0], views.windows[:, 3] - views.windows[:, 2])))
+    if views.perspective:
+        centre = vox.origin + 0.5 * vox.voxel_size * vox.resolution
+        width *= float(np.linalg.norm(centre - views.eye))
+    return int(np.clip(np.ceil(width / vox.voxel_size), 16, 2 * vox.resolution))
+
+
+def sparse_states(voxel_ids: np.ndarray, sample_states: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(sorted unique voxel ids, state) from per-sample states, a voxel lit when any of its samples is."""
+    order = np.argsort(voxel_ids, kind="stable")
+    ids = voxel_ids[order]
+    keys, start = np.unique(ids, return_index=True)
+    values = np.minimum.reduceat(sample_states[order], start) if len(ids) else np.zeros(0, np.uint8)
+    return keys, values.astype(np.uint8)

@@ -1,0 +1,166 @@
+"""kernels/voxel.cl (Lai & Cheng's shadow determination) against its NumPy reference, and the method."""
+
+import numpy as np
+import pytest
+
+import shadowcl as sc
+from shadowcl import voxel
+from shadowcl import voxelize as vz
+from shadowcl.reference import voxel as ref
+from shadowcl.subdivision import SubdivisionSurface
+
+from conftest import SCENES, require_models
+from test_voxelize import torus_net
+
+
+def ground_net(size=3.0, height=-0.6, count=10):
+    x, y = np.meshgrid(np.linspace(-size, size, count), np.linspace(-size, size, count), indexing="ij")
+    return np.stack([x, y, height + 0 * x], axis=-1)
+
+
+def torus_on_ground():
+    return vz.merge_tables([vz.grid_patch_table(torus_net(), True, True), vz.grid_patch_table(ground_net())])
+
+
+BOX = np.array([[-3.0, -3.0, -1.0], [3.0, 3.0, 1.0]])
+LIGHTS = {
+    "point": sc.PointLight((0.5, 0.3, 5.0)),
+    "directional": sc.DirectionalLight((-0.3, 0.2, -1.0)),
+    "inside": sc.PointLight((0.05, 2.1, 0.4)),      # inside the box: a cube of six views
+}
+
+
+def prepared(device, table, light, determination, resolution=24, **kw):
+    method = voxel.VoxelMethod(device, resolution=resolution, determination=determination, **kw)
+    method.prepare(table, light, BOX, 1e-4)
+    return method
+
+
+def light_args(light):
+    point = isinstance(light, sc.PointLight)
+    return point, np.asarray(light.position if point else light.direction, dtype=np.float64)
+
+
+@pytest.mark.parametrize("light", list(LIGHTS))
+def test_topology_matches_reference(device, light):
+    table = torus_on_ground()
+    m = prepared(device, table, LIGHTS[light], "topology")
+    vox = m.vox
+    states, unsure = ref.topology(vox.corners, vox.corner_voxels, m.sample_normals, *light_args(LIGHTS[light]),
+                                  vox.resolution)
+    assert unsure.mean() < 0.01
+    differ = np.flatnonzero((states != m.sample_states) & ~unsure)
+    assert len(differ) == 0, f"topology_shadow R=24 {light}: {len(differ)} of {len(states)} samples differ, e.g. {differ[:5]}"
+    assert 0.05 < np.mean(states == 2) < 0.95          # both lit and shadowed samples occur
+
+
+@pytest.mark.parametrize("light", ["point", "directional"])
+def test_lists_hold_leaves_sorted_nearest_first(device, light):
+    m = prepared(device, torus_on_ground(), LIGHTS[light], "topology")
+    offsets, items = m.lists.to_host(device)
+    centroid = m.vox.corners.astype(np.float64).mean(axis=1)
+    point, vec = light_args(LIGHTS[light])
+    key = np.linalg.norm(centroid - vec, axis=1) if point else centroid @ vec
+    assert len(items) >= m.vox.nleaves and set(np.unique(items).tolist()) == set(range(m.vox.nleaves))
+    step = np.diff(key[items])
+    inside = np.ones(len(step), dtype=bool)
+    inside[offsets[1:-1][(offsets[1:-1] > 0) & (offsets[1:-1] < len(items))] - 1] = False   # across cells
+    # float32 keys: equal within rounding may come in either order
+    assert np.all(step[inside] >= -1e-5 * np.abs(key[items][1:][inside]).max())
+
+
+@pytest.mark.parametrize("light", ["point", "directional"])
+def test_offset_matches_reference(device, light):
+    table = torus_on_ground()
+    m = prepared(device, table, LIGHTS[light], "offset")
+    vox = m.vox
+    grid = m.grid
+    states, unsure = ref.offset(vox.corners, m.sample_normals, *light_args(LIGHTS[light]), grid.views, grid.nx, grid.ny,
+                                np.sqrt(2) * vox.voxel_size)
+    assert unsure.mean() < 0.05
+    differ = np.flatnonzero((states != m.sample_states) & ~unsure)
+    assert len(differ) == 0, f"offset_shadow R=24 {light}: {len(differ)} of {len(states)} samples differ, e.g. {differ[:5]}"
+
+
+@pytest.mark.parametrize("determination", ["topology", "offset"])
+def test_frame_buffer_states_are_lit_wins_of_samples(device, determination):
+    m = prepared(device, torus_on_ground(), LIGHTS["point"], determination)
+    keys, values = voxel.sparse_states(m.vox.corner_voxels.ravel(), m.sample_states)
+    frame = vz.unpack_states(m.vox.frame_words, m.vox.resolution ** 3)
+    assert np.array_equal(np.flatnonzero(frame), keys)
+    assert np.array_equal(frame[keys], values)
+    assert set(np.unique(frame).tolist()) <= {0, 1, 2}
+
+
+@pytest.mark.parametrize("determination", ["topology", "offset"])
+def test_without_frame_buffer_same_answers(device, rng, determination):
+    table = torus_on_ground()
+    with_fb = prepared(device, table, LIGHTS["point"], determination, frame_buffer=True)
+    without = prepared(device, table, LIGHTS["point"], determination, frame_buffer=False)
+    points = with_fb.vox.corners.reshape(-1, 3)[rng.choice(4 * with_fb.vox.nleaves, 500)].astype(np.float64)
+    points += rng.normal(scale=0.2 * with_fb.vox.voxel_size, size=points.shape)
+    assert np.array_equal(with_fb.classify(points), without.classify(points))
+    assert np.array_equal(with_fb.visibility(points), without.visibility(points))
+
+
+def test_lit_plane_does_not_shadow_itself(device):
+    """Figure 1: a plane under grazing light is lit everywhere (topology-based)."""
+    plane = vz.grid_patch_table(ground_net())
+    for elevation in (2.0, 10.0, 45.0):
+        e = np.radians(elevation)
+        light = sc.DirectionalLight((np.cos(e), 0.3, -np.sin(e)))
+        m = voxel.VoxelMethod(device, resolution=64, determination="topology")
+        m.prepare(plane, light, BOX, 1e-4)
+        assert np.all(m.sample_states == 1), f"elevation {elevation}: {np.sum(m.sample_states == 2)} self-shadowed samples"
+
+
+def test_classify_and_visibility(device):
+    m = prepared(device, torus_on_ground(), LIGHTS["point"], "topology", resolution=32)
+    samples = m.vox.corners.reshape(-1, 3).astype(np.float64)
+    mask = m.classify(samples)
+    # a sample's point lies in its own voxel: its class is its voxel's lit-wins state (but for samples
+    # within 1e-4 voxels of a face, which the host's float64 mapping may put in the next voxel)
+    keys, values = voxel.sparse_states(m.vox.corner_voxels.ravel(), m.sample_states)
+    expect = values[np.searchsorted(keys, m.vox.corner_voxels.ravel())] == 2
+    x = (samples - m.vox.origin) / m.vox.voxel_size
+    clear = np.all(np.minimum(x - np.floor(x), np.ceil(x) - x) >= 1e-4, axis=1)
+    assert clear.mean() > 0.9
+    assert np.array_equal(mask[clear], expect[clear])
+    vis = m.visibility(samples)
+    assert set(np.unique(vis).tolist()) <= {0.0, 0.125, 0.25, 0.5, 1.0}
+    assert np.all(vis[mask] <= 0.5) and np.any(vis == 1.0) and np.any(vis == 0.0)
+    # normals facing away are in shadow
+    away = np.tile([0.0, 0.0, -1.0], (len(samples), 1))
+    assert m.classify(samples, away).all()
+    # a point far from every surface is classified lit, with a warning
+    with pytest.warns(UserWarning, match="more than 2 voxels"):
+        assert not m.classify(np.array([[2.5, 2.5, 0.9]]))[0]
+
+
+def test_scene_with_triangles_is_refused(device):
+    surface = SubdivisionSurface(torus_net().reshape(-1, 3)[:4], [[0, 1, 2, 3]])
+    scene = sc.Scene([("patch", surface), ("box", sc.Mesh(np.eye(3), [[0, 1, 2]]))], [LIGHTS["point"]])
+    with pytest.raises(ValueError, match="box"):
+        voxel.VoxelMethod(device).prepare(scene, LIGHTS["point"], BOX, 1e-4)
+
+
+def test_shadow_mask_on_a_scene(device):
+    require_models()                              # the scene's torus cage is in ../shared/models
+    scene = sc.Scene.load(SCENES / "subdivision" / "torus.toml")
+    points = scene.mesh.vertices[::7].astype(np.float64)
+    mask = sc.shadow_mask(scene, scene.light, points, method="voxel", resolution=64)
+    exact = sc.shadow_mask(scene, scene.light, points, method="exact")
+    assert mask.shape == exact.shape and 0.0 < mask.mean() < 1.0
+    assert np.mean(mask != exact) < 0.1       # a voxel-resolution method: errors near shadow edges only
+
+
+@pytest.mark.parametrize("kw, error, match", [
+    (dict(determination="both"), ValueError, "determination"),
+    (dict(connectivity=4), ValueError, "connectivity"),
+    (dict(resolution=0), ValueError, "resolution"),
+    (dict(resolution=4096), ValueError, "resolution"),
+    (dict(frame_buffer="yes"), TypeError, "frame_buffer"),
+])
+def test_bad_parameters(device, kw, error, match):
+    with pytest.raises(error, match=match):
+        voxel.VoxelMethod(device, **kw)
