@@ -42,6 +42,7 @@ from .lights import check_light
 METHODS = {
     "exact": "shadowcl.exact:ExactMethod",
     "shadow_map": "shadowcl.shadow_map:ShadowMapMethod",
+    "angular": "shadowcl.angular:AngularMethod",
     "shadow_volume": "shadowcl.shadow_volume:ShadowVolumeMethod",
     "voxel": "shadowcl.voxel:VoxelMethod",
 }

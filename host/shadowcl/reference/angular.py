@@ -1,0 +1,228 @@
+"""Float64 reference of the angular method: ridge edges, the span table, lookups, and the paper's
+loop-only table with the pairing of section 4. Written from the paper; never calls ``shadowcl.angular``.
+
+The frame (rotation, origin, rows) is an input here: its choice is a heuristic of the method, the
+table and the lookups given a frame are what is checked. Coordinates: a point light at the origin,
+row half-planes through the X axis at theta = atan2(Y, -Z), key s = X / |P|; a directional light comes
+from +Z, rows are planes Y = const, s = X.
+
+Tolerances (float32 device against float64 here):
+- Row membership of a (face, row) pair is exact except when the row centre lies within ``ROW_TIE`` (in
+  row units) of the end of the face's row-coordinate range: the device's atan2 and division round.
+- ``s`` of a span end: the device cuts the face in float32 from float32 corners rotated on the host;
+  the crossing point carries a few float32 roundings of the coordinates (~1e-7 relative) amplified by
+  1 / sin(angle between edge and row plane); ``S_TOL`` = 2e-4 holds for edges more than ~0.1 degree off
+  the plane, and spans from flatter cuts are compared where they agree (see the tests).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+ROW_TIE = 1e-3
+S_TOL = 2e-4
+
+
+def facing(vertices, faces, light_local_point: bool) -> np.ndarray:
+    """(F,) light-facing faces in the frame (point light at the origin, or directional light from +Z)."""
+    v = np.asarray(vertices, dtype=np.float64)[np.asarray(faces)]
+    n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+    side = -np.einsum("ij,ij->i", n, v[:, 0]) if light_local_point else n[:, 2]
+    return side > 0
+
+
+def ridge_edges(vertices, faces, point: bool) -> set:
+    """Ridge edges as {(tail, head)}: edges with exactly one light-facing face (a border edge's missing face
+    counts as hidden), oriented as the facing face runs along them."""
+    lit = facing(vertices, faces, point)
+    owners: dict = {}
+    for f, tri in enumerate(np.asarray(faces).tolist()):
+        if len(set(tri)) < 3:
+            continue
+        for a, b in ((tri[0], tri[1]), (tri[1], tri[2]), (tri[2], tri[0])):
+            owners.setdefault((min(a, b), max(a, b)), []).append((f, a, b))
+    out = set()
+    for sides in owners.values():
+        lit_sides = [(a, b) for f, a, b in sides if lit[f]]
+        if len(lit_sides) == 1 and len(sides) <= 2:
+            out.add(lit_sides[0])
+    return out
+
+
+def row_coordinate(local, point: bool) -> np.ndarray:
+    local = np.asarray(local, dtype=np.float64)
+    return np.arctan2(local[..., 1], -local[..., 2]) if point else local[..., 1]
+
+
+def face_rows(corners, t0, dt, rows, full_circle, point) -> list[np.ndarray]:
+    """Rows (ascending) whose centre lies in the row-coordinate range of each face (corners (F, 3, 3)),
+    every row for a point-light face whose YZ projection surrounds the pole, none for an edge-on face."""
+    out = []
+    for tri in np.asarray(corners, dtype=np.float64):
+        n = np.cross(tri[1] - tri[0], tri[2] - tri[0])
+        side = -n @ tri[0] if point else n[2]
+        if side == 0:
+            out.append(np.zeros(0, dtype=np.int64))
+            continue
+        t = row_coordinate(tri, point)
+        if point:
+            rel = (t - t[0] + np.pi) % (2 * np.pi) - np.pi             # unwrapped round the first corner
+            lo, hi = t[0] + rel.min(), t[0] + rel.max()
+            u, v = tri[:, 1], -tri[:, 2]
+            e = np.array([u[i] * v[(i + 1) % 3] - v[i] * u[(i + 1) % 3] for i in range(3)])
+            if np.all(e >= 0) or np.all(e <= 0):
+                out.append(np.arange(rows))
+                continue
+        else:
+            lo, hi = t.min(), t.max()
+        k = np.arange(np.ceil((lo - t0) / dt - 0.5), np.floor((hi - t0) / dt - 0.5) + 1).astype(np.int64)
+        k = np.unique(k % rows) if full_circle else k[(k >= 0) & (k < rows)]
+        out.append(k)
+    return out
+
+
+def span(tri, tk, point) -> tuple[float, float]:
+    """[s_lo, s_hi] of the cut of face ``tri`` by row ``tk``'s half-plane (point) or plane (directional);
+    (2, -2) when the cut misses."""
+    tri = np.asarray(tri, dtype=np.float64)
+    if point:
+        m, w = np.array([0.0, np.cos(tk), np.sin(tk)]), np.array([0.0, np.sin(tk), -np.cos(tk)])
+        sd = tri @ m
+    else:
+        sd = tri[:, 1] - tk
+    cuts = []
+    for i in range(3):
+        j = (i + 1) % 3
+        if (sd[i] > 0) != (sd[j] > 0):
+            c = tri[i] + sd[i] / (sd[i] - sd[j]) * (tri[j] - tri[i])
+            cuts.append((c[0], c @ w) if point else (c[0], 1.0))
+    if len(cuts) < 2:
+        return 2.0, -2.0
+    (a0, b0), (a1, b1) = cuts[:2]
+    if point:
+        if b0 < 0 and b1 < 0:
+            return 2.0, -2.0
+        if b0 < 0 or b1 < 0:                                   # cut at the pole axis
+            if b0 < 0:
+                (a0, b0), (a1, b1) = (a1, b1), (a0, b0)
+            a1, b1 = a0 + b0 / (b0 - b1) * (a1 - a0), 0.0
+        s0, s1 = a0 / np.hypot(a0, b0), a1 / np.hypot(a1, b1)
+    else:
+        s0, s1 = a0, a1
+    return min(s0, s1), max(s0, s1)
+
+
+def table(local_vertices, faces, table_faces, t0, dt, rows, full_circle, point) -> dict:
+    """The span table: arrays ``row``, ``face``, ``s_lo``, ``s_hi`` (float64), sorted by (row, s_lo, face),
+    and ``plane`` (F, 4) per face of ``faces`` (n, d with n.x = d, the light on the positive side)."""
+    v = np.asarray(local_vertices, dtype=np.float64)
+    faces = np.asarray(faces)
+    corners = v[faces[np.asarray(table_faces, dtype=np.int64)]]
+    rows_of = face_rows(corners, t0, dt, rows, full_circle, point)
+    rec = []
+    for f, tri, ks in zip(table_faces, corners, rows_of):
+        for k in ks:
+            lo, hi = span(tri, t0 + (k + 0.5) * dt, point)
+            rec.append((k, f, lo, hi))
+    rec = np.array(rec, dtype=np.float64).reshape(-1, 4)
+    order = np.lexsort((rec[:, 1], rec[:, 2], rec[:, 0]))
+    rec = rec[order]
+    allc = v[faces]
+    n = np.cross(allc[:, 1] - allc[:, 0], allc[:, 2] - allc[:, 0])
+    d = np.einsum("ij,ij->i", n, allc[:, 0])
+    side = -d if point else n[:, 2]
+    flip = np.where(side < 0, -1.0, 1.0)
+    return dict(row=rec[:, 0].astype(np.int64), face=rec[:, 1].astype(np.int64), s_lo=rec[:, 2], s_hi=rec[:, 3],
+                plane=np.c_[n * flip[:, None], d * flip])
+
+
+def receiver_keys(points, t0, dt, rows, full_circle, point):
+    """(row (-1 outside), s, |p|) of frame points."""
+    p = np.asarray(points, dtype=np.float64)
+    k = np.floor((row_coordinate(p, point) - t0) / dt).astype(np.int64)
+    if full_circle:
+        k %= rows
+    else:
+        k[(k < 0) | (k >= rows)] = -1
+    dist = np.linalg.norm(p, axis=1)
+    s = p[:, 0] / np.where(dist > 0, dist, 1) if point else p[:, 0]
+    return k, s, dist
+
+
+def classify(points, normals, tab, t0, dt, rows, full_circle, point, eps) -> np.ndarray:
+    """Bool (N,): a receiver is shadowed when a face with a span of its row containing its s meets its
+    segment to the light further than eps from it (normals: back-facing is shadowed, offset eps)."""
+    p = np.array(points, dtype=np.float64)
+    shadow = np.zeros(len(p), dtype=bool)
+    if normals is not None:
+        nrm = np.asarray(normals, dtype=np.float64)
+        back = (np.einsum("ij,ij->i", nrm, -p) <= 0) if point else (nrm[:, 2] <= 0)
+        shadow |= back
+        p = p + eps * nrm
+    k, s, dist = receiver_keys(p, t0, dt, rows, full_circle, point)
+    for i in np.flatnonzero(~shadow & (k >= 0)):
+        sel = (tab["row"] == k[i]) & (tab["s_lo"] <= s[i]) & (s[i] <= tab["s_hi"])
+        for f in tab["face"][sel]:
+            n, d = tab["plane"][f, :3], tab["plane"][f, 3]
+            q = n @ p[i]
+            hit = (q < d and (1 - d / q) * dist[i] > eps) if point else (d - q > eps * n[2])
+            if hit:
+                shadow[i] = True
+                break
+    return shadow
+
+
+# Section 4: the paper's loop-only table -----------------------------------------------------------------
+
+def loop_crossings(loop_local, tk, point):
+    """Crossings of the closed polygon ``loop_local`` ((L, 3) frame positions) with row ``tk``: (s, r, up)
+    per crossing, ``up`` = +1 where the loop goes towards larger theta (Y), -1 towards smaller."""
+    pts = np.asarray(loop_local, dtype=np.float64)
+    nxt = np.roll(pts, -1, axis=0)
+    if point:
+        m, w = np.array([0.0, np.cos(tk), np.sin(tk)]), np.array([0.0, np.sin(tk), -np.cos(tk)])
+        a, b = pts @ m, nxt @ m
+    else:
+        a, b = pts[:, 1] - tk, nxt[:, 1] - tk
+    out = []
+    for i in np.flatnonzero((a > 0) != (b > 0)):
+        c = pts[i] + a[i] / (a[i] - b[i]) * (nxt[i] - pts[i])
+        if point and c @ w <= 0:
+            continue
+        r = np.linalg.norm(c)
+        out.append((c[0] / r if point else c[0], r, 1 if b[i] > a[i] else -1))
+    return out
+
+
+def paper_pairs(loop_local, tk, point) -> list[tuple[float, float]]:
+    """Section 4's pairs of one loop in row ``tk``: the loop is cut at its local theta peaks into chains;
+    the two chains leaving a peak bound one shadow span, so in phi order each crossing going one way pairs
+    with the next unpaired crossing going the other way (first in, first out). Coils pair correctly
+    (figure 4: (a,b) with (e,f), (g,h) with (j,k)), where even-odd pairing of sorted crossings would make
+    the doubly covered part a hole."""
+    cuts = sorted(loop_crossings(loop_local, tk, point))
+    if not cuts:
+        return []
+    opener = cuts[0][2]
+    waiting, pairs = [], []
+    for s, _, up in cuts:
+        if up == opener or not waiting:          # (a figure-eight row opens the other way)
+            waiting.append(s)
+        else:
+            pairs.append((waiting.pop(0), s))
+    return pairs
+
+
+def even_odd_pairs(loop_local, tk, point) -> list[tuple[float, float]]:
+    """Sorted crossings paired first-second, third-fourth: the pairing section 4 warns against."""
+    cuts = sorted(c[0] for c in loop_crossings(loop_local, tk, point))
+    return list(zip(cuts[0::2], cuts[1::2]))
+
+
+def covered(pairs, s) -> np.ndarray:
+    """(len(s),) bool: s inside any of ``pairs``."""
+    s = np.asarray(s, dtype=np.float64)
+    out = np.zeros(len(s), dtype=bool)
+    for lo, hi in pairs:
+        out |= (s >= lo) & (s <= hi)
+    return out

@@ -1,0 +1,460 @@
+/* angular.cl: the discretized shadow volume in angular coordinates (Thakur, Cheng & Miura).
+ *
+ * Frame (the host moves geometry into it in float64, then rounds): point light at the origin;
+ * a "row" is a half-plane through the X axis (the poles are +-X), at angle
+ *     theta = atan2(Y, -Z)                          (the paper's eq. 2, extended to the full circle)
+ * and inside a row a direction is keyed by s = X / r = sin(psi), psi the angle from the plane X = 0
+ * (monotone in the paper's phi = atan(X / -Z) on every row). Directional light (LIGHT_POINT 0):
+ * light comes from +Z, a row is the plane Y = const and s = X.
+ *
+ * Table (CSR by row, rows sorted by s_lo): one record per (light-facing face, row it crosses),
+ * 8 floats: s_lo, s_hi (the face's span in the row: the paper's pair of RE / visible-edge crossings,
+ * visible edges thus entering "in duplicate"), then the face plane n.x = d (light on its positive
+ * side), used for the depth test: exact depth instead of interpolating r between the pair's ends;
+ * then the face index (int bits) and the running maximum of s_hi along the row (set by sort_rows).
+ * An empty span (the row's centre grazes the face) is s_lo = 2 > s_hi = -2 and never matches.
+ *
+ * Build options:
+ *   LIGHT_POINT   1 point light at the origin, 0 directional light from +Z
+ *   FULL_CIRCLE   1 rows cover [-pi, pi) and wrap around (light inside the scene)
+ *   NORMALS       1 receivers come with unit normals (back-facing = shadow, offset eps)
+ *   INPUT_F64     1 receivers are world float64 (moved into the frame here, in double), 0 frame float32
+ */
+#include "vecmath.h"
+
+#ifndef LIGHT_POINT
+#define LIGHT_POINT 1
+#endif
+#ifndef FULL_CIRCLE
+#define FULL_CIRCLE 0
+#endif
+#ifndef NORMALS
+#define NORMALS 0
+#endif
+#ifndef INPUT_F64
+#define INPUT_F64 0
+#endif
+#if INPUT_F64
+#pragma OPENCL EXTENSION cl_khr_fp64 : enable
+typedef double real_in;
+#else
+typedef float real_in;
+#endif
+
+/* Receiver i in the frame: local = rot (row-major 3x3) @ (world - origin) in double for world input (the
+ * normal rotated and normalised); frame float32 input is read as it is. */
+INLINE void load_receiver(const __global real_in *points, const __global real_in *normals, int i,
+                          const __global real_in *rot, real_in ox, real_in oy, real_in oz,
+                          float *px, float *py, float *pz, float *nx, float *ny, float *nz)
+{
+#if INPUT_F64
+    const double x = points[3 * i] - ox, y = points[3 * i + 1] - oy, z = points[3 * i + 2] - oz;
+    *px = (float)(rot[0] * x + rot[1] * y + rot[2] * z);
+    *py = (float)(rot[3] * x + rot[4] * y + rot[5] * z);
+    *pz = (float)(rot[6] * x + rot[7] * y + rot[8] * z);
+#if NORMALS
+    const double a = normals[3 * i], b = normals[3 * i + 1], c = normals[3 * i + 2];
+    const double len = sqrt(a * a + b * b + c * c);
+    *nx = (float)((rot[0] * a + rot[1] * b + rot[2] * c) / len);
+    *ny = (float)((rot[3] * a + rot[4] * b + rot[5] * c) / len);
+    *nz = (float)((rot[6] * a + rot[7] * b + rot[8] * c) / len);
+#endif
+#else
+    (void)rot; (void)ox; (void)oy; (void)oz;
+    LOAD3(points, i, *px, *py, *pz);
+#if NORMALS
+    LOAD3(normals, i, *nx, *ny, *nz);
+#endif
+#endif
+}
+
+#define REC 8             /* floats per record */
+#define EMPTY_LO 2.0f
+#define EMPTY_HI -2.0f
+#define PI_F 3.14159265358979f
+
+INLINE float row_coordinate(float y, float z)
+{
+#if LIGHT_POINT
+    return atan2(y, -z);
+#else
+    (void)z;
+    return y;
+#endif
+}
+
+/* Row of coordinate t: rows of width dt from t0; -1 outside the table (never with FULL_CIRCLE). */
+INLINE int row_of(float t, float t0, float inv_dt, int rows)
+{
+    int k = (int)SC_FLOOR((t - t0) * inv_dt);
+#if FULL_CIRCLE
+    k %= rows;
+    return k < 0 ? k + rows : k;
+#else
+    return (k < 0 || k >= rows) ? -1 : k;
+#endif
+}
+
+INLINE int wrap_row(int k, int rows)
+{
+#if FULL_CIRCLE
+    k %= rows;
+    return k < 0 ? k + rows : k;
+#else
+    (void)rows;
+    return k;
+#endif
+}
+
+/* face_rows: one work-item per table face. Writes the face plane (oriented with the light on its
+ * positive side; all zeros for an edge-on or zero-area face), the first row (unwrapped) and the number of
+ * rows whose centre lies in the face's row-coordinate range (the host sums them per row). */
+__kernel void face_rows(const __global float *vertices, const __global int *faces, const __global int *face_ids,
+                        const int nfaces, const float t0, const float dt, const int rows,
+                        __global float *planes, __global int *first_row, __global int *row_count)
+{
+    const int i = get_global_id(0);
+    if (i >= nfaces) return;
+    const int f = face_ids[i];
+    float x0, y0, z0, x1, y1, z1, x2, y2, z2;
+    LOAD3(vertices, faces[3 * f], x0, y0, z0);
+    LOAD3(vertices, faces[3 * f + 1], x1, y1, z1);
+    LOAD3(vertices, faces[3 * f + 2], x2, y2, z2);
+    /* Face plane */
+    const float ax = x1 - x0, ay = y1 - y0, az = z1 - z0, bx = x2 - x0, by = y2 - y0, bz = z2 - z0;
+    float nx = ay * bz - az * by, ny = az * bx - ax * bz, nz = ax * by - ay * bx;
+    float d = dot3(nx, ny, nz, x0, y0, z0);
+#if LIGHT_POINT
+    const float side = -d;            /* n . (light - v0) with the light at the origin */
+#else
+    const float side = nz;            /* n . (towards the light) */
+#endif
+    const float flip = side < 0.0f ? -1.0f : 1.0f;
+    nx *= flip; ny *= flip; nz *= flip; d *= flip;
+    const bool blocks = side != 0.0f;
+    planes[4 * i] = blocks ? nx : 0.0f;
+    planes[4 * i + 1] = blocks ? ny : 0.0f;
+    planes[4 * i + 2] = blocks ? nz : 0.0f;
+    planes[4 * i + 3] = blocks ? d : 0.0f;
+    /* Row range: the rows whose centre t0 + (k + 0.5) dt lies in [tmin, tmax] */
+    float tmin, tmax;
+    const float ta = row_coordinate(y0, z0), tb = row_coordinate(y1, z1), tc = row_coordinate(y2, z2);
+    bool all_rows = false;
+#if LIGHT_POINT
+    /* unwrap round the first corner; a face round the X axis (the pole) spans every row */
+    float db = tb - ta, dc = tc - ta;
+    db += db > PI_F ? -2.0f * PI_F : (db < -PI_F ? 2.0f * PI_F : 0.0f);
+    dc += dc > PI_F ? -2.0f * PI_F : (dc < -PI_F ? 2.0f * PI_F : 0.0f);
+    tmin = ta + SC_MIN(0.0f, SC_MIN(db, dc));
+    tmax = ta + SC_MAX(0.0f, SC_MAX(db, dc));
+    /* the YZ projection (u, v) = (y, -z) contains the origin: edge functions of one sign */
+    const float e0 = y0 * (-z1) - (-z0) * y1, e1 = y1 * (-z2) - (-z1) * y2, e2 = y2 * (-z0) - (-z2) * y0;
+    all_rows = (e0 >= 0.0f && e1 >= 0.0f && e2 >= 0.0f) || (e0 <= 0.0f && e1 <= 0.0f && e2 <= 0.0f);
+#else
+    tmin = SC_MIN(ta, SC_MIN(tb, tc));
+    tmax = SC_MAX(ta, SC_MAX(tb, tc));
+#endif
+    int k0 = (int)ceil((tmin - t0) / dt - 0.5f);
+    int k1 = (int)SC_FLOOR((tmax - t0) / dt - 0.5f);
+    if (all_rows) {
+        k0 = 0;
+        k1 = rows - 1;
+    }
+#if !FULL_CIRCLE
+    k0 = max(k0, 0);
+    k1 = min(k1, rows - 1);
+#endif
+    int n = blocks ? min(k1 - k0 + 1, rows) : 0;
+    n = max(n, 0);
+    first_row[i] = k0;
+    row_count[i] = n;
+}
+
+/* Span of a face in row k: s interval of its cut by the row's half-plane (point) or plane (directional). */
+INLINE void face_span(float x0, float y0, float z0, float x1, float y1, float z1, float x2, float y2, float z2,
+                      float tk, float *lo, float *hi)
+{
+#if LIGHT_POINT
+    const float my = cos(tk), mz = sin(tk);       /* plane normal (0, cos, sin); in-plane axis w = (0, sin, -cos) */
+    const float wy = mz, wz = -my;
+    const float s0 = my * y0 + mz * z0, s1 = my * y1 + mz * z1, s2 = my * y2 + mz * z2;
+#else
+    const float s0 = y0 - tk, s1 = y1 - tk, s2 = y2 - tk;
+#endif
+    float pa[2], pb[2];
+    int m = 0;
+    const float px[3] = {x0, x1, x2}, py[3] = {y0, y1, y2}, pz[3] = {z0, z1, z2}, ps[3] = {s0, s1, s2};
+    for (int e = 0; e < 3; ++e) {
+        const int g = e == 2 ? 0 : e + 1;
+        if ((ps[e] > 0.0f) != (ps[g] > 0.0f) && m < 2) {
+            const float t = ps[e] / (ps[e] - ps[g]);
+            const float cx = px[e] + t * (px[g] - px[e]);
+#if LIGHT_POINT
+            const float cy = py[e] + t * (py[g] - py[e]), cz = pz[e] + t * (pz[g] - pz[e]);
+            pa[m] = cx;
+            pb[m] = wy * cy + wz * cz;
+#else
+            pa[m] = cx;
+            pb[m] = 0.0f;
+#endif
+            ++m;
+        }
+    }
+    *lo = EMPTY_LO;
+    *hi = EMPTY_HI;
+    if (m < 2) return;
+#if LIGHT_POINT
+    /* keep the part on the row's half-plane (b >= 0): a face round the pole is cut at the X axis */
+    if (pb[0] < 0.0f && pb[1] < 0.0f) return;
+    if (pb[0] < 0.0f || pb[1] < 0.0f) {
+        const int neg = pb[0] < 0.0f ? 0 : 1;
+        const float u = pb[1 - neg] / (pb[1 - neg] - pb[neg]);
+        pa[neg] = pa[1 - neg] + u * (pa[neg] - pa[1 - neg]);
+        pb[neg] = 0.0f;
+    }
+    const float sa = pa[0] / SC_SQRT(pa[0] * pa[0] + pb[0] * pb[0]);
+    const float sb = pa[1] / SC_SQRT(pa[1] * pa[1] + pb[1] * pb[1]);
+#else
+    const float sa = pa[0], sb = pa[1];
+#endif
+    *lo = SC_MIN(sa, sb);
+    *hi = SC_MAX(sa, sb);
+}
+
+/* fill_rows: one work-item per table face; writes its record in every row it spans, at the row's
+ * offset plus a slot taken from the row's cursor (offsets from the exclusive prefix sum of counts). */
+__kernel void fill_rows(const __global float *vertices, const __global int *faces, const __global int *face_ids,
+                        const int nfaces, const float t0, const float dt, const int rows,
+                        const __global float *planes, const __global int *first_row, const __global int *row_count,
+                        const __global int *offsets, volatile __global int *cursor, __global float *records)
+{
+    const int i = get_global_id(0);
+    if (i >= nfaces) return;
+    const int n = row_count[i];
+    if (n == 0) return;
+    const int f = face_ids[i];
+    float x0, y0, z0, x1, y1, z1, x2, y2, z2;
+    LOAD3(vertices, faces[3 * f], x0, y0, z0);
+    LOAD3(vertices, faces[3 * f + 1], x1, y1, z1);
+    LOAD3(vertices, faces[3 * f + 2], x2, y2, z2);
+    const int k0 = first_row[i];
+    for (int j = 0; j < n; ++j) {
+        const int k = wrap_row(k0 + j, rows);
+        float lo, hi;
+        face_span(x0, y0, z0, x1, y1, z1, x2, y2, z2, t0 + ((float)k + 0.5f) * dt, &lo, &hi);
+        __global float *r = records + (size_t)REC * (offsets[k] + atomic_inc(&cursor[k]));
+        r[0] = lo;
+        r[1] = hi;
+        r[2] = planes[4 * i];
+        r[3] = planes[4 * i + 1];
+        r[4] = planes[4 * i + 2];
+        r[5] = planes[4 * i + 3];
+        r[6] = as_float(f);
+        r[7] = 0.0f;                       /* running max of s_hi, set by sort_rows */
+    }
+}
+
+INLINE void swap_records(__global float *rec, int a, int b)
+{
+    const float8 t = vload8(a, rec);
+    vstore8(vload8(b, rec), a, rec);
+    vstore8(t, b, rec);
+}
+
+/* sort_rows: one work-item per row; heapsort of the row's records by s_lo (in place, O(n log n)), then
+ * the running maximum of s_hi into each record's last float. */
+__kernel void sort_rows(const __global int *offsets, const int rows, __global float *records)
+{
+    const int k = get_global_id(0);
+    if (k >= rows) return;
+    __global float *rec = records + (size_t)REC * offsets[k];
+    const int n = offsets[k + 1] - offsets[k];
+    for (int start = n / 2 - 1, end = n; end > 1;) {
+        int root;
+        if (start >= 0) {
+            root = start--;
+        } else {
+            swap_records(rec, 0, --end);
+            root = 0;
+        }
+        for (int child = 2 * root + 1; child < end; child = 2 * root + 1) {
+            if (child + 1 < end && rec[REC * (child + 1)] > rec[REC * child]) ++child;
+            if (rec[REC * root] >= rec[REC * child]) break;
+            swap_records(rec, root, child);
+            root = child;
+        }
+    }
+    /* r[7]: running maximum of s_hi along the row, so a lookup can stop scanning backwards */
+    float run = -2.0f;
+    for (int j = 0; j < n; ++j) {
+        run = SC_MAX(run, rec[REC * j + 1]);
+        rec[REC * j + 7] = run;
+    }
+}
+
+/* The face of record r blocks the segment from p to the light, further than eps from p. */
+INLINE bool record_blocks(const __global float *r, float px, float py, float pz, float dist, float eps)
+{
+    const float q = dot3(r[2], r[3], r[4], px, py, pz);
+#if LIGHT_POINT
+    /* hit at t p, t = d / q in (0, 1) when q < d < 0; its distance from p is (1 - t) |p| > eps */
+    return (q - r[5]) * dist < eps * q;
+#else
+    (void)dist;
+    return r[5] - q > eps * r[4];            /* hit (d - q) / nz above p, nz > 0 */
+#endif
+}
+
+/* Receiver set-up: row, key s and distance; with normals a back-facing receiver is shadowed (code 1)
+ * and the others are moved eps along the normal. Returns -1 for "shadowed by facing", else the row
+ * (-2 outside the table: lit). */
+INLINE int receiver_row(float *px, float *py, float *pz, float nx, float ny, float nz, float eps,
+                        float t0, float inv_dt, int rows, float *s, float *dist)
+{
+#if NORMALS
+#if LIGHT_POINT
+    if (dot3(nx, ny, nz, -*px, -*py, -*pz) <= 0.0f) return -1;
+#else
+    if (nz <= 0.0f) return -1;
+#endif
+    *px += eps * nx; *py += eps * ny; *pz += eps * nz;
+#else
+    (void)nx; (void)ny; (void)nz;
+#endif
+    *dist = SC_SQRT(*px * *px + *py * *py + *pz * *pz);
+#if LIGHT_POINT
+    *s = *dist > 0.0f ? *px / *dist : 0.0f;
+#else
+    *s = *px;
+#endif
+    const int k = row_of(row_coordinate(*py, *pz), t0, inv_dt, rows);
+    return k < 0 ? -2 : k;
+}
+
+/* Section 7 step 2 over one row [begin, end) (sorted by s_lo, r[7] the running max of s_hi): the record
+ * that blocks p, or -1. A binary search finds the records starting at or before s; the scan goes
+ * backwards from there and stops where the running max of s_hi falls below s (no earlier record can
+ * contain s). Also returns, for scan-line runs, the largest s_hi below s among the records starting at
+ * or before s (prev_hi), the first s_lo after s (next_lo, the paper's nextX), and up to two records
+ * containing s that do not block p (c0, c1; inside counts them all). */
+INLINE int row_lookup(const __global float *records, int begin, int end, float s, float px, float py, float pz,
+                      float dist, float eps, float *prev_hi, float *next_lo, int *c0, int *c1, int *inside)
+{
+    int lo = begin, hi = end;
+    while (lo < hi) {
+        const int mid = (lo + hi) >> 1;
+        if (records[(size_t)REC * mid] <= s) lo = mid + 1;
+        else hi = mid;
+    }
+    *next_lo = lo < end ? records[(size_t)REC * lo] : 2.0f;
+    *prev_hi = -2.0f;
+    *c0 = *c1 = -1;
+    *inside = 0;
+    for (int j = lo - 1; j >= begin; --j) {
+        const __global float *r = records + (size_t)REC * j;
+        if (r[7] < s) {
+            *prev_hi = SC_MAX(*prev_hi, r[7]);
+            break;
+        }
+        if (r[1] >= s) {
+            if (record_blocks(r, px, py, pz, dist, eps)) return j;
+            *c1 = *inside == 1 ? j : *c1;
+            *c0 = *inside == 0 ? j : *c0;
+            ++*inside;
+        } else {
+            *prev_hi = SC_MAX(*prev_hi, r[1]);
+        }
+    }
+    return -1;
+}
+
+/* angular_classify: one work-item per receiver (frame coordinates, unit frame normals when NORMALS).
+ * out[i] = 1 in shadow, 0 lit: row_lookup, first hit wins. */
+__kernel void angular_classify(const __global real_in *points, const __global real_in *normals, const int n,
+                               const __global real_in *rot, const real_in ox, const real_in oy, const real_in oz,
+                               const float t0, const float inv_dt, const int rows, const float eps,
+                               const __global int *offsets, const __global float *records,
+                               __global uchar *out)
+{
+    const int i = get_global_id(0);
+    if (i >= n) return;
+    float px, py, pz, nx = 0.0f, ny = 0.0f, nz = 0.0f, s, dist;
+    load_receiver(points, normals, i, rot, ox, oy, oz, &px, &py, &pz, &nx, &ny, &nz);
+    const int k = receiver_row(&px, &py, &pz, nx, ny, nz, eps, t0, inv_dt, rows, &s, &dist);
+    uchar shadow = k == -1;
+    if (k >= 0) {
+        float prev_hi, next_lo;
+        int c0, c1, inside;
+        shadow = row_lookup(records, offsets[k], offsets[k + 1], s, px, py, pz, dist, eps, &prev_hi, &next_lo,
+                            &c0, &c1, &inside) >= 0;
+    }
+    out[i] = shadow;
+}
+
+INLINE bool record_hits(const __global float *records, int j, float s, float px, float py, float pz, float dist,
+                        float eps)
+{
+    const __global float *r = records + (size_t)REC * j;
+    return j >= 0 && r[0] <= s && s <= r[1] && record_blocks(r, px, py, pz, dist, eps);
+}
+
+/* angular_runs: one work-item per scan line of the camera image; its receivers are
+ * [line_start[l], line_start[l + 1]) in left-to-right order. A lookup (section 7 step 2) leaves a run
+ * state valid for the following receivers of the same row while their s stays in an interval:
+ *  - shadow: the hitting record's span; a receiver in it that the record still blocks is in shadow;
+ *  - lit: the open interval between the last span ending before s and the next span starting after s
+ *    (the paper's nextX), when at most two spans contain s (the receiver's own lit face, usually): no
+ *    other span can contain a receiver in the interval, so re-testing those two decides it.
+ * Anything else makes a full lookup: the result is bit for bit the per-receiver one.
+ * lookups[l] counts the full lookups of line l. */
+__kernel void angular_runs(const __global real_in *points, const __global real_in *normals,
+                           const __global real_in *rot, const real_in ox, const real_in oy, const real_in oz,
+                           const __global int *line_start, const int lines, const float t0, const float inv_dt, const int rows, const float eps,
+                           const __global int *offsets, const __global float *records,
+                           __global uchar *out, __global int *lookups)
+{
+    const int l = get_global_id(0);
+    if (l >= lines) return;
+    int cur_row = -3, mode = 0, c0 = -1, c1 = -1, count = 0;     /* mode 0 none, 1 shadow run, 2 lit run */
+    float lo = 1.0f, hi = -1.0f;
+    const int end_i = line_start[l + 1];
+    for (int i = line_start[l]; i < end_i; ++i) {
+        float px, py, pz, nx = 0.0f, ny = 0.0f, nz = 0.0f, s, dist;
+        load_receiver(points, normals, i, rot, ox, oy, oz, &px, &py, &pz, &nx, &ny, &nz);
+        const int k = receiver_row(&px, &py, &pz, nx, ny, nz, eps, t0, inv_dt, rows, &s, &dist);
+        if (k < 0) {
+            out[i] = k == -1;
+            continue;
+        }
+        if (k == cur_row && mode != 0 && (mode == 1 ? (s >= lo && s <= hi) : (s > lo && s < hi))) {
+            if (record_hits(records, c0, s, px, py, pz, dist, eps) || record_hits(records, c1, s, px, py, pz, dist, eps)) {
+                out[i] = 1;
+                continue;
+            }
+            if (mode == 2) {
+                out[i] = 0;
+                continue;
+            }
+        }
+        /* full lookup */
+        ++count;
+        cur_row = k;
+        float prev_hi, next_lo;
+        int inside;
+        const int hit = row_lookup(records, offsets[k], offsets[k + 1], s, px, py, pz, dist, eps, &prev_hi, &next_lo,
+                                   &c0, &c1, &inside);
+        if (hit >= 0) {
+            mode = 1;
+            c0 = hit;
+            c1 = -1;
+            lo = records[(size_t)REC * hit];
+            hi = records[(size_t)REC * hit + 1];
+        } else {
+            mode = inside <= 2 ? 2 : 0;
+            lo = prev_hi;
+            hi = next_lo;
+        }
+        out[i] = hit >= 0;
+    }
+    lookups[l] = count;
+}

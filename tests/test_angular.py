@@ -1,0 +1,410 @@
+"""The angular method (kernels/angular.cl, shadowcl.angular) against its float64 reference
+(shadowcl.reference.angular) and the exact method."""
+
+
+import numpy as np
+import pytest
+import trimesh
+
+import shadowcl as sc
+from shadowcl import angular
+from shadowcl.reference import angular as ref
+from shadowcl.render import camera_view, render_report
+
+from conftest import SCENES
+
+EPS = 1e-4
+
+
+# Meshes --------------------------------------------------------------------------------------------------
+
+def _mesh(*parts) -> sc.Mesh:
+    vertices, faces, base = [], [], 0
+    for part in parts:
+        vertices.append(np.asarray(part.vertices))
+        faces.append(np.asarray(part.faces) + base)
+        base += len(part.vertices)
+    return sc.Mesh(np.vstack(vertices), np.vstack(faces))
+
+
+def _box(extents, centre):
+    box = trimesh.creation.box(extents=extents)
+    box.apply_translation(centre)
+    return box
+
+
+def cube_over_plane() -> sc.Mesh:
+    return _mesh(_box((1, 1, 1), (0, 1.5, 0)), _box((8, 0.2, 8), (0, -0.1, 0)))
+
+
+def coil(turns=1.6, per_turn=40, r_in=1.0, r_out=1.6, rise=0.6, thickness=0.2) -> sc.Mesh:
+    """A helical ribbon of ``turns`` turns with vertical walls (figure 2(b)): lit from straight above, its
+    one ridge-edge loop (the rim of its top strip) winds twice round the sector where the turns overlap."""
+    n = int(round(turns * per_turn))
+    a = np.linspace(0.0, 2 * np.pi * turns, n + 1)
+    y = rise * a / (2 * np.pi)
+    ring = []
+    for r, dy in ((r_in, 0.0), (r_out, 0.0), (r_out, thickness), (r_in, thickness)):
+        ring.append(np.c_[r * np.cos(a), y + dy, r * np.sin(a)])
+    vertices = np.stack(ring, axis=1).reshape(-1, 3)
+    faces = []
+    for i in range(n):
+        for c in range(4):
+            p, q = 4 * i + c, 4 * i + (c + 1) % 4
+            faces += [[p, q, q + 4], [p, q + 4, p + 4]]
+    faces += [[0, 2, 1], [0, 3, 2], [4 * n, 4 * n + 1, 4 * n + 2], [4 * n, 4 * n + 2, 4 * n + 3]]
+    mesh = trimesh.Trimesh(vertices, np.array(faces), process=False)
+    trimesh.repair.fix_winding(mesh)
+    if mesh.volume < 0:
+        mesh.invert()
+    return sc.Mesh(mesh.vertices, mesh.faces)
+
+
+def ground_points(rng, n, half=4.0, y=0.0):
+    return np.c_[rng.uniform(-half, half, n), np.full(n, y), rng.uniform(-half, half, n)]
+
+
+def prepared(device, mesh, light, points, **params):
+    method = angular.AngularMethod(device, **params)
+    method.prepare(mesh, light, np.stack([points.min(0), points.max(0)]), EPS)
+    return method
+
+
+def local_vertices(method):
+    return method.frame.to_local(method.mesh.vertices.astype(np.float64).astype(np.float32))
+
+
+# 1. Ridge-edge loops ---------------------------------------------------------------------------------------
+
+def _check_loops(device, mesh, light, point):
+    loops = angular.ridge_loops(device, mesh, light)
+    origin = light.position if point else np.zeros(3)
+    local = mesh.vertices.astype(np.float64) - origin
+    if not point:                      # the reference's directional light comes from +Z
+        _, rotation = angular.angular_frame(light, mesh.vertices)
+        local = local @ rotation.T
+    expected = ref.ridge_edges(local, mesh.faces, point)
+    got = set()
+    for loop in loops:
+        chain = loop.vertices.tolist()
+        for tail, head in zip(chain, chain[1:] + chain[:1]):
+            assert (tail, head) not in got, "an edge appears twice in the loops"
+            got.add((tail, head))
+    assert got == expected
+    degree = np.zeros(len(mesh.vertices), dtype=int)
+    for tail, head in expected:
+        degree[tail] += 1
+        degree[head] += 1
+    assert np.all(degree % 2 == 0), "section 2: an even number of ridge edges at every vertex"
+    return loops
+
+
+def test_loops_convex_and_multi(device):
+    cube = _box((1, 1, 1), (0, 1.5, 0))
+    assert len(_check_loops(device, _mesh(cube), sc.PointLight((0.3, 5, 0.2)), True)) == 1
+    two = _mesh(cube, _box((1, 1, 1), (3, 1.5, 0)))
+    assert len(_check_loops(device, two, sc.PointLight((1.3, 5, 0.2)), True)) == 2
+    # a torus lit from above its axis: outer rim and inner rim, one inside the other
+    torus = trimesh.creation.torus(major_radius=1.0, minor_radius=0.3, major_sections=24, minor_sections=12)
+    loops = _check_loops(device, _mesh(torus), sc.DirectionalLight((0, 0, -1)), False)
+    assert len(loops) == 2
+
+
+def test_loops_coiled(device):
+    mesh = coil()
+    loops = _check_loops(device, mesh, sc.DirectionalLight((0, -1, 0)), False)
+    assert len(loops) == 1
+    xz = mesh.vertices[loops[0].vertices][:, [0, 2]].astype(np.float64)
+    # winding number round a point of the overlapped sector (angle 0.3 turn, radius 1.3): two turns
+    centre = np.array([1.3 * np.cos(0.6 * np.pi), 1.3 * np.sin(0.6 * np.pi)])
+    angles = np.unwrap(np.arctan2(*(xz - centre).T[::-1]))
+    turns = (angles[-1] - angles[0] + np.angle(np.exp(1j * (angles[0] - angles[-1])))) / (2 * np.pi)
+    assert abs(abs(turns) - 2) < 1e-6, turns
+
+
+def test_loops_open_mesh_through_border(device):
+    # a cup without a top: the lit inside's loop closes along the rim (border edges)
+    scene = sc.Scene.load(SCENES / "hard" / "open_mesh.toml")
+    _check_loops(device, scene.mesh, scene.lights[0], True)
+
+
+def test_loops_non_manifold_refused(device):
+    scene = sc.Scene.load(SCENES / "hard" / "non_manifold.toml")
+    with pytest.raises(ValueError, match="mesh: "):
+        angular.ridge_loops(device, scene.mesh, scene.lights[0])
+
+
+# 2. The table ----------------------------------------------------------------------------------------------
+
+def _compare_table(method):
+    f = method.frame
+    got = method.entries()
+    want = ref.table(local_vertices(method), method.mesh.faces, method.table.table_faces, f.t0, f.dt, f.rows,
+                     f.full_circle, f.point)
+    # discrete part: the (face, row) pairs, identified by the plane; ties at the ends of a face's range aside
+    corners = local_vertices(method)[method.mesh.faces[method.table.table_faces]]
+    t = ref.row_coordinate(corners, f.point)
+    if f.point:
+        t = t[:, :1] + (t - t[:, :1] + np.pi) % (2 * np.pi) - np.pi
+    ends = np.stack([t.min(1), t.max(1)], axis=1)
+    tie_faces = set()
+    for face, (lo, hi) in zip(method.table.table_faces, ends):
+        for e in (lo, hi):
+            g = (e - f.t0) / f.dt - 0.5
+            if abs(g - np.round(g)) < ref.ROW_TIE:
+                tie_faces.add(int(face))
+    got_face = got["face"]
+    assert set(got_face.tolist()) <= set(method.table.table_faces.tolist())
+    planes = want["plane"][got_face]
+    scale = np.linalg.norm(planes[:, :3], axis=1, keepdims=True)
+    assert np.allclose(got["plane"] / scale, planes / scale, atol=1e-5)   # float32 cross products of O(1) corners
+    got_set = {(int(r), int(fc)) for r, fc in zip(got["row"], got_face) if fc not in tie_faces}
+    want_set = {(int(r), int(fc)) for r, fc in zip(want["row"], want["face"]) if fc not in tie_faces}
+    assert got_set == want_set, f"(row, face) pairs differ: {len(got_set ^ want_set)} of {len(want_set)}"
+    # rows sorted by s_lo (section 7.1, step 1.7)
+    for k in range(f.rows):
+        lo = got["s_lo"][got["offsets"][k]:got["offsets"][k + 1]]
+        assert np.all(np.diff(lo) >= 0)
+    # spans within S_TOL (reference docstring) where both cut the face
+    index = {(int(r), int(fc)): i for i, (r, fc) in enumerate(zip(want["row"], want["face"]))}
+    errors = []
+    for i, (r, fc) in enumerate(zip(got["row"], got_face)):
+        j = index.get((int(r), int(fc)))
+        if j is not None and want["s_lo"][j] <= want["s_hi"][j] and got["s_lo"][i] <= got["s_hi"][i]:
+            errors.append(max(abs(got["s_lo"][i] - want["s_lo"][j]), abs(got["s_hi"][i] - want["s_hi"][j])))
+    assert len(errors) > 0.9 * len(got_set)
+    assert max(errors) < ref.S_TOL, max(errors)
+    return got, want
+
+
+@pytest.mark.parametrize("rows", [1, 7, 64, 255])
+def test_table_point_light_closed(device, rows):
+    mesh = cube_over_plane()
+    pts = ground_points(np.random.default_rng(rows), 100)
+    method = prepared(device, mesh, sc.PointLight((0.3, 5, 0.2)), pts, theta_resolution=rows)
+    assert method.stats["closed"] and method.stats["table_faces"] == 4   # the lit tops of the cube and the plane
+    _compare_table(method)
+
+
+def test_table_random_soup(device, rng):
+    # an open triangle soup: every face enters the table, hidden ones too
+    centres = rng.uniform(-1, 1, (60, 3))
+    tris = centres[:, None] + rng.normal(scale=0.3, size=(60, 3, 3))
+    mesh = sc.Mesh(tris.reshape(-1, 3), np.arange(180).reshape(60, 3))
+    pts = rng.uniform(-2, 2, (500, 3))
+    for light in (sc.PointLight((0.2, 4.0, 0.5)), sc.DirectionalLight((0.3, -1, 0.2))):
+        method = prepared(device, mesh, light, pts, theta_resolution=97)
+        assert not method.stats["closed"] and method.stats["table_faces"] == 60
+        _compare_table(method)
+        _compare_lookups(method, pts, None)
+
+
+def test_table_light_inside_full_circle(device):
+    scene = sc.Scene.load(SCENES / "hard" / "light_inside.toml")
+    method = angular.AngularMethod(device, theta_resolution=90)
+    method.prepare(scene.mesh, scene.lights[0], scene.bounds, EPS)
+    assert method.frame.full_circle
+    _compare_table(method)
+
+
+# 3. Lookups ------------------------------------------------------------------------------------------------
+
+def _compare_lookups(method, points, normals):
+    """Kernel lookups against the reference lookups on the same frame; receivers whose decision is a
+    float32 tie (s within S_TOL of a span end, or the hit within 1e-4 relative of eps) are left out."""
+    f = method.frame
+    got = method.classify(points, normals)
+    lp = f.to_local(points)
+    ln = None if normals is None else normals @ f.rotation.T
+    tab = ref.table(local_vertices(method), method.mesh.faces, method.table.table_faces, f.t0, f.dt, f.rows,
+                    f.full_circle, f.point)
+    want = ref.classify(lp, ln, tab, f.t0, f.dt, f.rows, f.full_circle, f.point, method.eps)
+    k, s, _ = ref.receiver_keys(lp, f.t0, f.dt, f.rows, f.full_circle, f.point)
+    g = (ref.row_coordinate(lp, f.point) - f.t0) / f.dt
+    tie = np.abs(g - np.round(g)) < ref.ROW_TIE
+    for i in range(len(lp)):
+        sel = tab["row"] == k[i]
+        ends = np.r_[tab["s_lo"][sel], tab["s_hi"][sel]]
+        if len(ends) and np.min(np.abs(ends - s[i])) < 10 * ref.S_TOL:
+            tie[i] = True
+    differ = np.flatnonzero((got != want) & ~tie)
+    assert len(differ) == 0, f"angular_classify: {len(differ)} of {len(lp)} differ, first {differ[:5]}"
+    assert (~tie).sum() > 0.8 * len(lp)
+    return got
+
+
+def test_lookups_cube_over_plane(device, rng):
+    mesh = cube_over_plane()
+    pts = np.r_[ground_points(rng, 2000), rng.uniform(-0.6, 0.6, (300, 3)) + (0, 1.5, 0)]
+    normals = np.tile([0.0, 1.0, 0.0], (len(pts), 1))
+    for light in (sc.PointLight((0.3, 5, 0.2)), sc.DirectionalLight((0.3, -1, 0.2))):
+        method = prepared(device, mesh, light, pts, theta_resolution=50)
+        _compare_lookups(method, pts, None)
+        _compare_lookups(method, pts, normals)
+
+
+def test_render_runs_equal_per_pixel(device):
+    """render: scan-line runs give the per-pixel masks bit for bit, and with the pole on the camera's right
+    axis (rows along the scan lines) one lookup serves several pixels."""
+    scene = sc.Scene.load(SCENES / "default.toml")
+    runs = render_report(scene, "angular", width=160, height=90)
+    single = render_report(scene, "angular", width=160, height=90, runs=False)
+    assert np.array_equal(runs.shadow, single.shadow)
+    seen = runs.receivers
+    method = angular.AngularMethod(device, expected_receivers=len(seen.points))
+    method.prepare(scene.mesh, scene.lights[0], scene.bounds, EPS)
+    view = camera_view(scene, 160, 90)
+    mask = method.classify_view(view, None, seen)
+    right = view.matrix[0, :3] / np.linalg.norm(view.matrix[0, :3])
+    assert abs(method.frame.rotation[0] @ right) > 0.999
+    assert np.array_equal(mask, method.classify(seen.points, seen.normals))
+    assert method.stats["lookups"] < 0.5 * len(seen.points), method.stats["lookups"]
+
+
+def test_runs_count_lookups(device, rng):
+    mesh = cube_over_plane()
+    # scan lines across the plane: receivers in left-to-right order along world x, rows along world z
+    xs, zs = np.meshgrid(np.linspace(-4, 4, 200), np.linspace(-4, 4, 50))
+    pts = np.c_[xs.ravel(), np.zeros(xs.size), zs.ravel()]
+    method = prepared(device, mesh, sc.PointLight((0.3, 5, 0.2)), pts, theta_resolution=100, prefer_x=(1, 0, 0))
+    line = np.repeat(np.arange(50), 200)
+    by_runs = method.classify_lines(pts, None, line, 50)
+    lookups = method.stats["lookups"]
+    assert np.array_equal(by_runs, method.classify(pts))
+    assert by_runs.any() and lookups < len(pts) / 4, lookups
+
+
+# Masks against the exact method ------------------------------------------------------------------------------
+
+def test_cube_over_plane_error_bound(device, rng):
+    """Ground receivers may differ from exact only if the exact answer changes within half a row (in theta)
+    of their direction: the spans come from the row's centre."""
+    mesh, cube = cube_over_plane(), _mesh(_box((1, 1, 1), (0, 1.5, 0)))
+    light = sc.PointLight((0.3, 5, 0.2))
+    pts = ground_points(rng, 20000)
+    exact = sc.shadow_mask(mesh, light, pts, method="exact", eps=EPS)
+    errors = []
+    for rows in (60, 240):
+        method = prepared(device, mesh, light, pts, theta_resolution=rows)
+        got = method.classify(pts)
+        differ = np.flatnonzero(got != exact)
+        errors.append(len(differ))
+        # rotate each differing receiver about the frame's X axis (through the light) by up to half a row
+        local = method.frame.to_local(pts[differ])
+        changes = np.zeros(len(differ), dtype=bool)
+        for frac in np.linspace(-0.5, 0.5, 11) * 1.01:
+            a = frac * method.frame.dt
+            c, s = np.cos(a), np.sin(a)
+            rot = local.copy()
+            rot[:, 1], rot[:, 2] = c * local[:, 1] - s * local[:, 2], s * local[:, 1] + c * local[:, 2]
+            world = rot @ method.frame.rotation + method.frame.origin
+            # the cube alone: a rotated receiver can dip under the plane, which must not count as shadow
+            changes |= sc.shadow_mask(cube, light, world, method="exact", eps=EPS) != exact[differ]
+        assert changes.all(), f"{(~changes).sum()} receivers differ with no shadow edge within half a row"
+    assert errors[1] < errors[0]
+    assert errors[1] < 0.005 * len(pts)
+
+
+HARD = sorted((SCENES / "hard").glob("*.toml"))
+
+
+@pytest.mark.parametrize("path", HARD, ids=[p.stem for p in HARD])
+def test_hard_cases(device, path):
+    """Every hard scene: the error against exact at the default resolution (the image's own limit) stays
+    under 3 % of the covered pixels (the discretization band), and 360 rows are no worse than 90."""
+    scene = sc.Scene.load(path)
+    exact = render_report(scene, "exact", width=160, height=90).shadow
+    wrong = {}
+    for rows in (None, 90, 360):
+        result = render_report(scene, "angular", width=160, height=90, theta_resolution=rows)
+        wrong[rows] = np.count_nonzero(result.shadow != exact)
+    # 3 %: the 256-segment sphere's terminator (2.3 %, a grazing self-shadow band half a row wide) is the worst
+    assert wrong[None] <= 0.03 * exact.size, wrong
+    assert wrong[360] <= wrong[90] + 0.002 * exact.size, wrong
+
+
+def test_coiled_pairing(device):
+    """Figure 4: a coiled loop. The paper's pairing of the loop's crossings (reference) covers the doubly
+    wound sector that even-odd pairing would leave as a hole, and the device table's spans cover the same."""
+    mesh = coil()
+    light = sc.DirectionalLight((0, -1, 0))
+    pts = ground_points(np.random.default_rng(4), 4000, half=2.0, y=-0.5)
+    method = prepared(device, mesh, light, pts, theta_resolution=40)
+    loops = angular.ridge_loops(device, mesh, light)
+    loop_local = method.frame.to_local(mesh.vertices[loops[0].vertices].astype(np.float64))
+    got = method.entries()
+    holes = 0
+    for k, tk in enumerate(method.frame.row_centres):
+        paper = ref.paper_pairs(loop_local, tk, False)
+        naive = ref.even_odd_pairs(loop_local, tk, False)
+        s = np.linspace(-2, 2, 801)
+        ends = np.array([e for p in paper for e in p] + [e for p in naive for e in p])
+        far = np.min(np.abs(s[:, None] - ends[None, :]), axis=1) > 1e-3 if len(ends) else np.ones(len(s), bool)
+        sel = slice(got["offsets"][k], got["offsets"][k + 1])
+        spans = list(zip(got["s_lo"][sel], got["s_hi"][sel]))
+        assert np.array_equal(ref.covered(spans, s)[far], ref.covered(paper, s)[far]), f"row {k}"
+        holes += np.count_nonzero(ref.covered(paper, s)[far] & ~ref.covered(naive, s)[far])
+    assert holes > 0, "the coil is there: even-odd pairing would open holes"
+    exact = sc.shadow_mask(mesh, light, pts, method="exact", eps=EPS)
+    assert np.mean(method.classify(pts) != exact) < 0.03
+
+
+def test_shadow_counts_two_lights(device, rng):
+    mesh = cube_over_plane()
+    lights = [sc.PointLight((0.3, 5, 0.2)), sc.PointLight((-2.0, 4, 1.0))]
+    pts = ground_points(rng, 5000)
+    counts = angular.shadow_counts(mesh, lights, pts, theta_resolution=400, device=device, eps=EPS)
+    exact = sum(sc.shadow_mask(mesh, l, pts, method="exact", eps=EPS).astype(int) for l in lights)
+    assert counts.dtype == np.int32 and counts.max() == 2
+    assert np.mean(counts != exact) < 0.01
+
+
+def test_api(device):
+    assert "theta_resolution" in sc.methods()["angular"]
+    mesh = cube_over_plane()
+    mask = sc.shadow_mask(mesh, sc.PointLight((0.3, 5, 0.2)), [[0.0, 0.0, 0.0], [3.5, 0.0, 3.5]], method="angular")
+    assert mask.tolist() == [True, False]
+    image = sc.render(sc.Scene.load(SCENES / "default.toml"), method="angular", width=64, height=36)
+    assert image.shape == (36, 64, 3)
+
+
+# Bad input -----------------------------------------------------------------------------------------------
+
+BAD = [
+    (lambda d: angular.AngularMethod(d, theta_resolution=0), ValueError, "theta_resolution"),
+    (lambda d: angular.AngularMethod(d, theta_resolution=1.5), TypeError, "theta_resolution"),
+    (lambda d: angular.AngularMethod(d, theta_resolution=10**7), ValueError, "theta_resolution"),
+    (lambda d: angular.AngularMethod(d, runs="yes"), TypeError, "runs"),
+    (lambda d: angular.AngularMethod(d, prefer_x=(np.nan, 0, 0)), ValueError, "prefer_x"),
+    (lambda d: angular.AngularMethod(d, prefer_x=(1, 0)), ValueError, "prefer_x"),
+    (lambda d: angular.AngularMethod(d, prefer_x=(0, 0, 0)), ValueError, "prefer_x"),
+    (lambda d: angular.AngularMethod(d).classify(np.zeros((1, 3))), RuntimeError, "prepare"),
+    (lambda d: angular.AngularMethod(d).prepare("mesh", sc.PointLight((0, 1, 0)), np.zeros((2, 3)), 0.0),
+     TypeError, "mesh"),
+    (lambda d: angular.AngularMethod(d).prepare(cube_over_plane(), "light", np.zeros((2, 3)), 0.0), TypeError, "light"),
+    (lambda d: angular.AngularMethod(d).prepare(cube_over_plane(), sc.PointLight((0, 5, 0)), np.zeros((2, 3)),
+                                                -1.0), ValueError, "eps"),
+    (lambda d: prepared(d, cube_over_plane(), sc.PointLight((0, 5, 0)), np.zeros((2, 3))).classify([[np.nan, 0, 0]]),
+     ValueError, "points"),
+    (lambda d: prepared(d, cube_over_plane(), sc.PointLight((0, 5, 0)), np.zeros((2, 3))).classify(
+        np.zeros((2, 3)), np.zeros((2, 3))), ValueError, "normals"),
+    (lambda d: prepared(d, cube_over_plane(), sc.PointLight((0, 5, 0)), np.zeros((2, 3))).classify_lines(
+        np.zeros((2, 3)), None, [1, 0], 2), ValueError, "line"),
+    (lambda d: angular.shadow_counts(cube_over_plane(), [], np.zeros((1, 3)), device=d), ValueError, "lights"),
+    (lambda d: sc.shadow_mask(cube_over_plane(), sc.PointLight((0, 5, 0)), np.zeros((1, 3)), method="angular",
+                              theta_bins=3), TypeError, "theta_bins"),
+]
+
+
+@pytest.mark.parametrize("call, error, match", BAD, ids=[f"bad{i}" for i in range(len(BAD))])
+def test_bad_input(device, call, error, match):
+    with pytest.raises(error, match=match):
+        call(device)
+
+
+def test_table_too_big(small_buffer_device):
+    # 65536 rows of a plane spanning them all: ~65536 records of 32 bytes fit; a mesh of many such faces not
+    big = _mesh(*[_box((8, 0.2, 8), (0, -0.1 - 1e-3 * i, 0)) for i in range(100)])
+    method = angular.AngularMethod(small_buffer_device, theta_resolution=angular.MAX_ROWS)
+    with pytest.raises(ValueError, match="theta_resolution"):
+        method.prepare(big, sc.PointLight((0.1, 5, 0.1)), big.bounds, EPS)
