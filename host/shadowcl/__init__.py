@@ -11,10 +11,11 @@ from .methods import methods, shadow_mask
 from .metrics import MaskError, mask_error
 from .render import render
 from .scene import Scene
+from .subdivision import SubdivisionSurface
 from .views import Camera, View
 
 __all__ = [
     "Camera", "Device", "DirectionalLight", "KernelBuildError", "MaskError", "Mesh", "PointLight",
-    "Scene", "View", "get_device", "list_devices", "mask_error", "methods", "render", "shadow_mask",
+    "Scene", "SubdivisionSurface", "View", "get_device", "list_devices", "mask_error", "methods", "render", "shadow_mask",
 ]
 __version__ = "0.1.0"
