@@ -340,11 +340,14 @@ def main(argv=None) -> None:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", type=Path, default=RESULTS, help="folder for STEM.json, .md and .png")
     parser.add_argument("--compare", type=Path, help="an earlier run's JSON: print new/old ratios")
+    parser.add_argument("--sweep", type=json.loads, default={},
+                        help='JSON {method: {parameter: [values]}} replacing those grids (A/B in one run), '
+                             'e.g. \'{"exact": {"split": [false, true]}}\'')
     args = parser.parse_args(argv)
 
     counts = QUICK if args.quick else FULL
     repeats = args.repeats or (3 if args.quick else 5)
-    sweep = FULL_SWEEP if args.full_sweep else SWEEP
+    sweep = {**(FULL_SWEEP if args.full_sweep else SWEEP), **args.sweep}
     doc = run_bench([rx.load_scene(s) for s in args.scenes], {m: sweep.get(m, {}) for m in args.methods},
                     counts, repeats, args.seed)
     doc["settings"]["quick"] = args.quick

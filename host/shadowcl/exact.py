@@ -28,6 +28,18 @@ receivers on the ground + 200 k on the model, random order, PoCL on 2 cores; ran
   for the gather alone) than the cache misses it saves (49 ms random against 33 ms sorted).
 - Watertight against dot5: the same speed within noise (the cull does most of the rejecting); dot5
   leaks on 6-8% of rays aimed at shared edges and vertices, watertight on none.
+- Large triangles in long coarse lists are binned by pieces (``split``, CSR only; :meth:`ExactMethod._split_lists`).
+  A light inside a room (scenes/hard/light_inside.toml, cube of six views) had its walls, floor and
+  long pillar faces in the coarse lists: 46 coarse entries per receiver on average, 52 in all per
+  walk (38 of them crossing the segment's plane, i.e. past the cull), classify at ~3x Embree's time.
+  Binned by pieces (the walk still tests the original triangle): mean walk 18 entries (p99 84 -> 43),
+  13 past the cull, same masks bit for bit. Split off and on alternating (loaded machine): classify
+  0.44x, prepare + classify 0.48x, prepare 2.8 -> 12.3 ms (five more builds, the host's dedup); vs
+  the fastest Embree 0.30 -> 0.65 and 0.57 -> 0.73 in bench runs (bench/results/exact-split-light-inside.md).
+  Triggered only when the coarse lists hold more than SPLIT_PER_COARSE_CELL entries per coarse cell
+  (light_inside 33; contact 4.5, grazing_plane 6.2; a model on a ground quad lists the quad in every
+  coarse cell: bunny 2.6, ogre 3.1, teapot 2.9, where a forced split shortened the mean walk by less
+  than 0.2 entries, for five more builds).
 
 Where the time goes (bunny, point light, 1.2 M receivers; ~80 ms in all, ~14 M receivers/s, 1.7-2.3x
 the fastest embreex in the same bench run): prepare ~19 ms (count pass ~10: projection ~3-4, cell tests
@@ -59,6 +71,8 @@ TESTS = ("watertight", "dot5")
 LISTS = ("csr", "linked")
 DOT5_FLOATS = 16          # kernels/ray_triangle.h
 WT_FLOATS = 16
+SPLIT_PER_COARSE_CELL = 8.0   # coarse entries per coarse cell above which large triangles are split
+SPLIT_ROUNDS = 4              # rounds of two bisections at most: a piece keeps at least 1/256 of its triangle
 
 
 def _optional_int(name, value, minimum=1, maximum=None):
@@ -77,6 +91,37 @@ def _as_points(name: str, value) -> np.ndarray:
     if array.ndim != 2 or array.shape[1] != 3:
         raise ValueError(f"{name}: expected shape (N, 3), got {array.shape}")
     return np.ascontiguousarray(array, dtype=np.float64)
+
+
+def bisect_longest_edges(pieces: np.ndarray, owner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each (P, 3, 3) float32 triangle cut in two at the midpoint of its longest edge; ``owner`` follows.
+
+    The midpoint of float32 corners a, b is (a + b) / 2 in float64 (exact), rounded once to float32,
+    so two pieces that cut the same edge get the same bits whatever the order of its corners.
+    """
+    corners = pieces.astype(np.float64)
+    lengths = np.linalg.norm(corners[:, [1, 2, 0]] - corners, axis=2)     # edge k runs corner k -> k + 1
+    k = np.argmax(lengths, axis=1)
+    rows = np.arange(len(pieces))
+    a, b, c = (pieces[rows, (k + j) % 3] for j in range(3))
+    mid = (0.5 * (corners[rows, k] + corners[rows, (k + 1) % 3])).astype(np.float32)
+    halves = np.concatenate([np.stack([a, mid, c], axis=1), np.stack([mid, b, c], axis=1)])
+    return np.ascontiguousarray(halves), np.concatenate([owner, owner])
+
+
+def _sorted_unique(values: np.ndarray) -> np.ndarray:
+    """np.unique by sorting (measured: NumPy 2.4's hashing np.unique is ~10x slower on 700 k int64 keys)."""
+    values = np.sort(values)
+    return values[np.concatenate([[True], values[1:] != values[:-1]])] if len(values) else values
+
+
+def _coarse_of_fine(grid) -> np.ndarray:
+    """The coarse cell of every fine cell of ``grid``, (fine cells,) int64 (kernels/lightspace.h)."""
+    parts = []
+    for k in range(grid.views.nviews):
+        j, i = np.divmod(np.arange(grid.nx[k] * grid.ny[k], dtype=np.int64), grid.nx[k])
+        parts.append(grid.base1[k] + (j // lightspace.COARSE) * grid.nx1[k] + i // lightspace.COARSE)
+    return np.concatenate(parts)
 
 
 def _host_buffer(device, array: np.ndarray):
@@ -109,10 +154,13 @@ class ExactMethod:
         "initial_capacity": (None, "linked lists: nodes allocated for the first build (None: 8 per triangle); "
                                    "an overflow grows the buffer to the counted size and rebuilds"),
         "chunk": (1 << 22, "receivers per classify launch (bounds device memory)"),
+        "split": (True, "csr lists: when the coarse lists are long (more than SPLIT_PER_COARSE_CELL entries "
+                        "per coarse cell: walls round a light inside a room), bin the triangles listed there "
+                        "by pieces small enough for the fine grid; the walk still tests the whole triangle"),
     }
 
     def __init__(self, device, resolution=None, expected_receivers=None, test="watertight", lists="csr",
-                 initial_capacity=None, chunk=1 << 22):
+                 initial_capacity=None, chunk=1 << 22, split=True):
         self.device = device
         self.resolution = _optional_int("resolution", resolution, 1, lightspace.MAX_SIDE)
         self.expected_receivers = _optional_int("expected_receivers", expected_receivers, 0)
@@ -123,6 +171,9 @@ class ExactMethod:
         self.test, self.lists_kind = test, lists
         self.initial_capacity = _optional_int("initial_capacity", initial_capacity, 1)
         self.chunk = positive_int("chunk", chunk)
+        if not isinstance(split, (bool, np.bool_)):
+            raise TypeError(f"split: expected a bool, got {type(split).__name__}")
+        self.split = bool(split)
         self._builder = lightspace.ListBuilder(device, corners=3)
         # float64 points go to the device as they are when it has doubles (cheaper than converting here)
         self._fp64 = "cl_khr_fp64" in device.cl_device.extensions
@@ -168,6 +219,10 @@ class ExactMethod:
         grid = lightspace.make_grid(views, cells=cells, resolution=self.resolution)
         t2 = time.perf_counter()
         lists = self._builder.build(grid, tris_dev, ntris, self.lists_kind, self.initial_capacity)
+        split = dict(split_triangles=0, split_pieces=0, split_rounds=0)
+        if self.split and self.lists_kind == "csr" and \
+                lists.coarse_entries > SPLIT_PER_COARSE_CELL * (grid.cells - grid.fine_cells):
+            lists, split = self._split_lists(grid, lists, vertices, mesh.faces)
         t3 = time.perf_counter()
         if self.test == "dot5":
             records = dev.empty(4 * DOT5_FLOATS * ntris, "dot5 triangle records")
@@ -188,11 +243,96 @@ class ExactMethod:
         self.stats = dict(lists.stats)
         device_bytes = sum(b.size for b in (tris_dev, records, *lists.buffers(), lists.params) if b is not None)
         self.stats.update(
-            triangles=ntris, lists=self.lists_kind, test=self.test, device_bytes=int(device_bytes),
+            triangles=ntris, lists=self.lists_kind, test=self.test, device_bytes=int(device_bytes), **split,
             # entries per fine cell; linked lists do not know their coarse share, so it is counted in there
             mean_list=(lists.entries - max(lists.coarse_entries, 0)) / grid.fine_cells,
             upload_s=t1 - t0, views_s=t2 - t1, lists_s=t3 - t2, records_s=t4 - t3, prepare_s=t4 - t0,
         )
+
+    def _split_lists(self, grid, lists, vertices: np.ndarray, faces: np.ndarray):
+        """CSR lists binned by pieces of the triangles in ``lists``' coarse cells, entries naming triangles.
+
+        A triangle whose projection spans more than LS_COARSE fine cells goes to the coarse grid, whose
+        cells are few and large: with walls and long pillars round a light inside a room, every
+        receiver walks dozens of them. Each such triangle is cut in four (two bisections at the longest
+        edge), the pieces binned on their own, and those still coarse cut again (SPLIT_ROUNDS at most;
+        the builder decides, so no projection is repeated here). The lists are then built over the
+        other triangles and the final pieces, and each entry rewritten to its piece's triangle.
+
+        Same answers: the walk tests the original corners (its record), so an answer could only change
+        if a cell the triangle's projection touches were missing from every piece's cells. Pieces
+        sharing an edge share its corners' bits; a new corner is off the original triangle by at most
+        half a float32 ulp of its coordinates, the order of the rounding the builder already makes on
+        every corner (d = v - light), far inside its allowance (DELTA = 1/64 cell plus LS_REL_TOL,
+        ~170 ulps of the magnitudes involved). A missing cell would also be a leak, which the tests
+        look for (rays aimed through shared edges of split triangles).
+
+        Shorter walks, never longer: entries are made unique per cell (neighbouring pieces share
+        cells: ~30% repeats on light_inside), and a fine entry is dropped when the fine cell's coarse
+        cell lists the same triangle (a triangle with pieces left coarse after the last round), so a
+        receiver meets each triangle at most once, and only if it met it before the split. Done on the
+        host, only when splitting; only the pieces' entries are sorted. Returns the lists and split
+        statistics.
+        """
+        dev = self.device
+        large = _sorted_unique(self._coarse_items(lists))
+        triangles = vertices[faces]                                   # (F, 3, 3) float32, as gather_triangles
+        pieces, owner = triangles[large], large.astype(np.int32)
+        done_pieces, done_owner, rounds = [], [], 0
+        while len(pieces) and rounds < SPLIT_ROUNDS:
+            # two bisections a round: half the builds of one, for a few more pieces
+            pieces, owner = bisect_longest_edges(*bisect_longest_edges(pieces, owner))
+            rounds += 1
+            trial = self._builder.build(grid, dev.to_device(pieces), len(pieces))
+            fine = np.ones(len(pieces), dtype=bool)
+            fine[self._coarse_items(trial)] = False
+            done_pieces.append(pieces[fine])
+            done_owner.append(owner[fine])
+            pieces, owner = pieces[~fine], owner[~fine]
+        whole = np.ones(len(faces), dtype=bool)
+        whole[large] = False
+        prims = np.ascontiguousarray(np.concatenate([triangles[whole], *done_pieces, pieces]))
+        owners = np.concatenate([np.flatnonzero(whole).astype(np.int32), *done_owner, owner])
+        built = self._builder.build(grid, dev.to_device(prims), len(prims))
+        # Entries of pieces name their triangle, once per cell (sorted (cell, triangle) keys, repeats
+        # dropped) and once per walk (a fine entry goes when its coarse cell lists the triangle too).
+        # Entries of whole triangles are unique already (one level, once per cell): they keep their
+        # slots' order, and each cell gets them first, then its pieces' triangles: no sort of them.
+        offsets, items = built.to_host(dev)
+        ntris, nwhole = len(faces), int(whole.sum())
+        cell = np.repeat(np.arange(grid.cells, dtype=np.int64), np.diff(offsets))
+        piece = items >= nwhole
+        keys = _sorted_unique(cell[piece] * ntris + owners[items[piece]])
+        fine = keys < grid.fine_cells * ntris
+        above = _coarse_of_fine(grid)[keys[fine] // ntris] * ntris + keys[fine] % ntris
+        listed = keys[~fine]                                          # sorted, few: look up by bisection
+        at = np.minimum(np.searchsorted(listed, above), max(len(listed) - 1, 0))
+        repeat = listed[at] == above if len(listed) else np.zeros(len(above), dtype=bool)
+        keys = np.concatenate([keys[fine][~repeat], listed])
+        parts = [(cell[~piece], owners[items[~piece]]), (keys // ntris, (keys % ntris).astype(np.int32))]
+        counts = [np.bincount(c, minlength=grid.cells) for c, _ in parts]
+        offsets = np.concatenate([[0], np.cumsum(counts[0] + counts[1])])
+        items = np.empty(int(offsets[-1]), np.int32)
+        slot = offsets[:-1].copy()                                    # next free slot of each cell
+        for (c, t), n in zip(parts, counts):                          # c is sorted: rank within its cell
+            items[slot[c] + np.arange(len(c)) - (np.cumsum(n) - n)[c]] = t
+            slot += n
+        offsets = offsets.astype(np.int32)
+        coarse_entries = int(offsets[-1] - offsets[grid.fine_cells])
+        split_lists = lightspace.Lists("csr", grid, ntris, len(items), offsets=dev.to_device(offsets),
+                                       items=dev.to_device(items if len(items) else np.zeros(1, np.int32)),
+                                       capacity=len(items), coarse_entries=coarse_entries, params=built.params,
+                                       stats=dict(built.stats, entries=len(items), coarse_entries=coarse_entries,
+                                                  split_entries=built.entries))
+        return split_lists, dict(split_triangles=len(large), split_pieces=len(prims) - nwhole,
+                                 split_rounds=rounds)
+
+    def _coarse_items(self, lists) -> np.ndarray:
+        """The entries of the coarse cells of CSR ``lists`` (primitive indices), read back."""
+        items = np.empty(lists.coarse_entries, np.int32)
+        if len(items):
+            cl.enqueue_copy(self.device.queue, items, lists.items, src_offset=4 * (lists.entries - len(items)))
+        return items
 
     def _options(self, normals: bool, brute: bool = False) -> tuple[str, ...]:
         return self.grid.options + (
@@ -270,11 +410,29 @@ class ExactMethod:
         return dev.from_device(out_dev, n, np.uint8)
 
     # statistics ----------------------------------------------------------------------------------------
-    def list_statistics(self) -> dict:
-        """Longest list, empty-cell share, mean over non-empty cells (reads the lists back)."""
+    def _list_lengths(self) -> np.ndarray:
+        """Entries of every cell's list, (cells,) int64 (reads the lists back)."""
         offsets, _ = self.lists.to_host(self.device) if self.lists_kind == "linked" else (
             self.device.from_device(self.lists.offsets, self.grid.cells + 1, np.int32), None)
-        lengths = np.diff(offsets.astype(np.int64))
+        return np.diff(offsets.astype(np.int64))
+
+    def walk_lengths(self, points) -> np.ndarray:
+        """Entries each point's walk can visit: its fine plus its coarse cell's list, (N,) int64.
+
+        The bound on the triangle tests classify runs for a receiver at ``points`` ((N, 3) world; the
+        cells of the points themselves, not moved along a normal). Reads the lists back: for tests
+        and profiles, not for speed.
+        """
+        if not self._prepared:
+            raise RuntimeError("walk_lengths: call prepare(mesh, light, receiver_bounds, eps) first")
+        rel = _as_points("points", points) - self.origin
+        fine, coarse, _ = lightspace.point_cells(self.device, self.grid, rel)
+        lengths = self._list_lengths()
+        return lengths[fine] + (lengths[coarse] if self.lists.coarse_entries != 0 else 0)
+
+    def list_statistics(self) -> dict:
+        """Longest list, empty-cell share, mean over non-empty cells (reads the lists back)."""
+        lengths = self._list_lengths()
         nonempty = lengths[lengths > 0]
         extra = dict(max_list=int(lengths.max(initial=0)), empty_cells=float(np.mean(lengths == 0)),
                      mean_list_nonempty=float(nonempty.mean()) if len(nonempty) else 0.0)
