@@ -63,9 +63,10 @@ import numpy as np
 import pyopencl as cl
 
 from . import lightspace
-from .checks import check_bounds, finite_array, positive_int
+from .checks import positive_int
 from .geometry import Mesh, bounds_diagonal
-from .lights import PointLight, check_light
+from .lights import PointLight
+from .methods import check_prepare
 
 TESTS = ("watertight", "dot5")
 LISTS = ("csr", "linked")
@@ -189,12 +190,7 @@ class ExactMethod:
 
         ``receiver_bounds`` is a (2, 3) world box; ``eps`` the absolute offset of DESIGN.md.
         """
-        if not isinstance(mesh, Mesh):
-            raise TypeError(f"mesh: expected a Mesh, got {type(mesh).__name__}")
-        light = check_light(light)
-        box = check_bounds("receiver_bounds", receiver_bounds)
-        if not (np.isfinite(eps) and eps >= 0):
-            raise ValueError(f"eps: must be a finite non-negative distance, got {eps!r}")
+        light, box = check_prepare(mesh, light, receiver_bounds, eps)
         dev = self.device
         t0 = time.perf_counter()
         # Local frame: the centre of the occluders, in float64. Not of the receivers too: one receiver far

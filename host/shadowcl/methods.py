@@ -33,7 +33,7 @@ import importlib
 
 import numpy as np
 
-from .checks import finite_array, non_negative_float
+from .checks import check_bounds, finite_array, non_negative_float
 from .device import get_device
 from .geometry import Mesh, bounds_diagonal
 from .lights import check_light
@@ -99,6 +99,17 @@ def as_mesh(scene_or_mesh) -> Mesh:
 
 def default_eps(bounds: np.ndarray) -> float:
     return EPS_FRACTION * max(bounds_diagonal(bounds), np.finfo(np.float32).tiny)
+
+
+def check_prepare(mesh, light, receiver_bounds, eps):
+    """``prepare``'s arguments checked: ``(light, receiver box (2, 3) float64)``; named errors otherwise."""
+    if not isinstance(mesh, Mesh):
+        raise TypeError(f"mesh: expected a Mesh, got {type(mesh).__name__}")
+    light = check_light(light)
+    box = check_bounds("receiver_bounds", receiver_bounds)
+    if not (np.isfinite(eps) and eps >= 0):
+        raise ValueError(f"eps: must be a finite non-negative distance, got {eps!r}")
+    return light, box
 
 
 def check_points(points, normals) -> tuple[np.ndarray, np.ndarray | None]:

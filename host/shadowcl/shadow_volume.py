@@ -91,7 +91,7 @@ from .checks import check_bounds, non_negative_float
 from .exact import ExactMethod
 from .geometry import Mesh, bounds_diagonal
 from .lights import PointLight, check_light
-from .methods import check_points
+from .methods import check_points, check_prepare
 from .silhouette import TRACKER_METHODS, Silhouette, SilhouetteTracker, edge_adjacency, silhouette_edges
 
 STENCILS = ("zfail", "zpass")
@@ -320,12 +320,7 @@ class ShadowVolumeMethod:
     def prepare(self, mesh: Mesh, light, receiver_bounds, eps: float) -> None:
         """Build the shadow volume of ``mesh`` (or its LOD level) seen from ``light`` for receivers in
         ``receiver_bounds``; ``eps`` is the absolute offset of DESIGN.md."""
-        if not isinstance(mesh, Mesh):
-            raise TypeError(f"mesh: expected a Mesh, got {type(mesh).__name__}")
-        light = check_light(light)
-        box = check_bounds("receiver_bounds", receiver_bounds)
-        if not (np.isfinite(eps) and eps >= 0):
-            raise ValueError(f"eps: must be a finite non-negative distance, got {eps!r}")
+        light, box = check_prepare(mesh, light, receiver_bounds, eps)
         t0 = time.perf_counter()
         if self.lod is None:
             occluders = mesh
