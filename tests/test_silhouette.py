@@ -390,6 +390,18 @@ def test_large_jump_falls_back_to_brute_force(device):
 
 
 @pytest.mark.parametrize("walks", ["device", "host"])
+def test_tracking_from_an_empty_silhouette_falls_back(device, walks):
+    # A light inside a closed sphere lights no face: no silhouette to track from. Moved outside, the
+    # silhouette must still be found (it was silently empty, recall 0, before the fallback).
+    mesh = icosphere(3)
+    lights = [sc.PointLight((0.0, 0.0, 0.0)), sc.PointLight((0.1, 0.0, 0.0)), sc.PointLight((3.0, 0.2, 0.0)),
+              sc.PointLight((3.0, 0.3, 0.0))]
+    recalls, precisions, stats = follow(device, mesh, lights, method="tracking", walks=walks)
+    assert np.all(recalls == 1.0) and np.all(precisions == 1.0)
+    assert [s["fallback"] for s in stats] == [False, True, True, False]     # tracked again once it has edges
+
+
+@pytest.mark.parametrize("walks", ["device", "host"])
 def test_walks_find_a_silhouette_that_moved_away(device, walks):
     # A light 1.5 radii from a sphere lights a cap of 48 degrees; moved by 120 degrees, the new cap and
     # the old one do not meet, so every seed must come from a III.B walk (stale share 1).

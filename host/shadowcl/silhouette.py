@@ -390,6 +390,7 @@ class HalfEdges:
 
     @classmethod
     def build(cls, adjacency: EdgeAdjacency) -> "HalfEdges":
+        """The tables of ``adjacency``'s mesh (sort-based, vectorised; collapsed faces get no edges)."""
         faces = adjacency.faces.astype(np.int64)
         nvertices, nhalves = len(adjacency.vertices), 3 * len(faces)
         tails, heads = faces.reshape(-1), faces[:, [1, 2, 0]].reshape(-1)
@@ -442,7 +443,8 @@ class SilhouetteTracker:
       edges of at least ``180 + concave_angle`` degrees, where new loops are born.
       Jumps: when more than ``max_stale`` of last frame's edges are no longer silhouettes, or more than
       ``max_lost`` of the walks are lost, or fewer than ``1 - max_stale`` times last frame's edges
-      are found, the frame is redone by brute force (``stats["fallback"]``): no silent loss after a
+      are found, or last frame had no silhouette edge at all (a light inside a closed mesh: nothing to
+      track from), the frame is redone by brute force (``stats["fallback"]``): no silent loss after a
       large light move. (Small loops that vanish leave lost walks too, ~12 % of the bunny's walks at
       3 degrees a frame, hence a share rather than any loss.)
     - ``"random"`` (Markosian et al. 1997, as the paper uses it): test a random ``fraction`` of the
@@ -458,16 +460,16 @@ class SilhouetteTracker:
     step at a time; both give the same edges (tested). The randomized method grows on the host in
     NumPy rounds: its growth tests every edge at a chain's vertices, so it also finds loops that
     touch a found one at a vertex (a device version growing by the loop walk instead lost 2-6 % of
-    the recall on the bunny and ogre, 60 frames at 3 degrees, fractions 0.02 and 0.1). On the host, faces are tested by :func:`host_facing` as the walks reach them,
-    except that a batch of at least ``device_batch`` new faces (default ``1000 + F / 20``, the
+    the recall on the bunny and ogre, 60 frames at 3 degrees, fractions 0.02 and 0.1). On the host,
+    faces are tested by :func:`host_facing` as the walks reach them, except that a batch of at least ``device_batch`` new faces (default ``1000 + F / 20``, the
     measured break-even) is done by one device pass over every face. Every facing, on host or device,
     is the kernel's float32 arithmetic, so tracking and random never report an edge the brute force
     would not (precision 1).
 
     ``update(light)`` returns a :class:`Silhouette` (codes 0 for edges not found; ``facing`` computed
     on use); ``stats`` describes the last update (``fallback``, ``stale``, ``lost_walks``,
-    ``faces_tested`` (None for device walks), ``edges_found``; ``rounds`` and ``sampled`` for random); ``reset()`` forgets the history. Tracking refuses non-manifold and inconsistently wound
-    meshes (its loop walk follows the winding), random non-manifold ones (``ValueError``); brute force
+    ``faces_tested`` (None for device walks), ``edges_found``; ``rounds`` and ``sampled`` for random);
+    ``reset()`` forgets the history. Tracking refuses non-manifold and inconsistently wound meshes (its loop walk follows the winding), random non-manifold ones (``ValueError``); brute force
     reports non-manifold edges with code :data:`NONMANIFOLD`.
     """
 
@@ -548,10 +550,13 @@ class SilhouetteTracker:
             found = self._random_frame()
         elif self._previous is None:
             found = None
+        elif not len(self._previous):
+            # Nothing to track from: a loop born away from the border and concave edges would be lost.
+            found, fallback = None, True
         else:
             found = self._on_device.frame() if self._on_device else self._tracking_frame()
             fallback = found is None
-        if found is None:                            # first tracking frame, or a detected jump
+        if found is None:                            # first tracking frame, no history, or a detected jump
             silhouette = silhouette_edges(self.device, self.adjacency, light)
             self._previous = self._lit_halves(silhouette)
             if self._on_device:

@@ -35,9 +35,11 @@ class ControlMesh:
                 self.vertex_faces.setdefault(a, []).append(fi)
 
     def is_boundary_edge(self, a: int, b: int) -> bool:
+        """Whether edge (a, b) has one face."""
         return len(self.edge_faces[(min(a, b), max(a, b))]) == 1
 
     def boundary_neighbours(self, v: int) -> list[int]:
+        """The vertices joined to v by boundary edges (none for an interior vertex)."""
         out = []
         for f in self.vertex_faces[v]:
             face = self.faces[f]
