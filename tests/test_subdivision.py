@@ -598,3 +598,15 @@ def test_opensubdiv_differs_only_at_sharp_corners():
     edge_only = [(surface.vertices[a] + 6 * surface.vertices[v] + surface.vertices[b]) / 8
                  for v in corners for a, b in [mesh.boundary_neighbours(v)]]
     assert nearest_distances(np.array(edge_only), theirs).max() < 1e-6
+
+
+def test_voxelize_method_is_the_voxelizer_on_this_surface(device):
+    from shadowcl.voxelize import voxelize
+
+    cube = SubdivisionSurface([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]],
+                              [[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]])
+    ours, theirs = cube.voxelize(32, connectivity=18, device=device), voxelize(device, cube, 32, 18)
+    assert ours.occupied.any()
+    np.testing.assert_array_equal(ours.occupied, theirs.occupied)
+    np.testing.assert_array_equal(ours.origin, theirs.origin)
+    assert ours.voxel_size == theirs.voxel_size

@@ -711,6 +711,13 @@ class SubdivisionSurface:
         """Number of patches in the patch table."""
         return len(self._patches.first)
 
+    def voxelize(self, resolution: int, connectivity: int = 26, device=None):
+        """This surface voxelized into a ``resolution``^3 cubic frame buffer with N-adjacency ``connectivity``
+        (6, 18 or 26): a :class:`shadowcl.voxelize.Voxelization` (``.occupied``, ``.origin``, ``.voxel_size``)."""
+        from . import voxelize  # voxelize builds on this module's patch table
+
+        return voxelize.voxelize(get_device(device), self, resolution, connectivity)
+
     def patch_table(self, device=None) -> PatchTable:
         """The :class:`PatchTable` (world coordinates) with device buffers on ``device``; cached per device."""
         device = get_device(device)
