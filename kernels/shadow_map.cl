@@ -126,11 +126,11 @@ kernel void shadow_visibility(global const float *points, global const float *no
     global const float *map = map0;
 #endif
 
-    /* Texel footprint T at the receiver, across the light's ray; the bias is in units of T */
+    /* Texel footprint T at the receiver: a texel's widest extent across the light's ray, the bias's
+     * unit. Perspective: texel size (tangent units) times the distance along the view axis (w); off
+     * the axis by alpha a texel is that wide across the ray sideways, cos(alpha) narrower radially. */
 #if PERSPECTIVE
-    const float ex = px - to_light.x, ey = py - to_light.y, ez = pz - to_light.z;
-    const float w_axis = v[12] * px + v[13] * py + v[14] * pz + v[15];
-    const float texel = v[16] * dot3(ex, ey, ez, ex, ey, ez) / w_axis;
+    const float texel = v[16] * (v[12] * px + v[13] * py + v[14] * pz + v[15]);
 #else
     const float texel = v[16];
 #endif

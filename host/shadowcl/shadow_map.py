@@ -17,7 +17,13 @@ kernel's choice of face cannot pick a face left out.
 The paper's remedies, as parameters:
 
 - ``bias``: how far behind the stored surface a receiver may lie and still be lit, in units of the
-  texel footprint ``T`` at the receiver (the width of one texel across the light's ray there):
+  texel footprint ``T`` at the receiver (the widest extent of one texel across the light's ray there:
+  the texel size orthographically; in perspective the texel size in tangent units times the receiver's
+  distance along the view axis. Off the axis by alpha a texel is that wide across the ray sideways and
+  cos(alpha) narrower radially; the former ``|d|^2 / (d . axis)`` over-estimated it by 1 / cos^2(alpha),
+  up to 3x in a cube face's corner, and the larger bias meant more peter-panning; the fix cut the
+  wrong receivers of five point-light scenes with nearest lookup by 9 % at 256 and 8 % at 2048, +2 % at
+  4096, bench/results/shadow-map-defaults.md):
   ``"constant"`` ``T * bias_scale * (0.5 + 2 r)``; ``"slope"`` ``T * bias_scale * (0.5 + r tan(theta))``
   (theta the angle between normal and light, tan capped at 16); ``"normal"``: the receiver is first
   lifted ``T * bias_scale * r sin(theta)`` along its normal, then compared with ``T * bias_scale * 0.5``.
@@ -35,13 +41,20 @@ The paper's remedies, as parameters:
 :meth:`ShadowMapMethod.visibility` gives the fractional visibility in [0, 1]; ``classify`` thresholds it:
 in shadow below 0.5. A normal facing away from the light is in shadow (visibility 0).
 
-Defaults (bias "normal", filter "bilinear", 2048 texels; measured on the bench's bunny, ogre and
-teapot scenes, 1.2 M receivers, against the exact method, bench/results/run-20261122-052407):
-misclassified 0.156 %, 0.176 %, 0.037 % at 2048 and 0.114 %, 0.124 %, 0.025 % at 4096; the normal offset with bilinear depth is also the only
-setting whose lit plane stays clean at every elevation tested (0.5 degrees and up: see the tests).
-The slope bias with nearest lookup is as good on the bunny at 2048 but self-shadows a plane below
-about 5 degrees of elevation; pcf filtering trades false shadow for light leaks (its bias grows with
-its reach).
+Defaults (bias "normal", filter "nearest", 2048 texels). Measured side by side in one run against the
+exact method, 1.2 M receivers per scene (bench/results/shadow-map-defaults.md): misclassified at 2048
+with nearest / bilinear, bunny 0.072 / 0.157 %, ogre 0.098 / 0.176 %, teapot 0.020 / 0.044 %,
+grazing_plane 0.022 / 0.044 %, contact 0.0036 / 0.0165 %, thin_occluder 0.0056 / 0.0123 %; nearest is
+lower at 23 of the 24 scene x resolution pairs (256 to 4096; the exception, grazing_plane at 256, is
+0.142 against 0.141 %), at no clear difference in time. Why: bilinear interpolation across a depth
+edge (an occluder's silhouette) gives depths between occluder and floor, nearer than a receiver just
+outside the shadow for most of the texel, so bilinear grows every shadow by up to a texel (its errors
+are mostly false shadow); a nearest texel moves the edge by at most half a texel either way. What
+nearest gives up: its errors lean to false light (light leaks) at low resolution (bunny at 256: 6163
+false light against bilinear's 2538). The normal offset keeps a lit plane clean with either filter at
+every elevation tested (0.5, 3 and 30 degrees: see the tests). The slope bias with nearest lookup
+self-shadows a plane below about 5 degrees of elevation; pcf filtering trades false shadow for light
+leaks (its bias grows with its reach).
 
 Which form of the paper: the method transforms whatever points it is given. ``render`` gives it only
 the camera-visible surface points (the paper's post-process form); the bench gives it points as
@@ -102,13 +115,13 @@ class ShadowMapMethod:
         "resolution": (None, f"texels per side of each (square) depth map; None picks {DEFAULT_RESOLUTION}"),
         "bias": ("normal", "depth bias: 'constant', 'slope' (slope-scaled) or 'normal' (normal offset)"),
         "bias_scale": (1.0, "multiplies the default bias, which is derived from the texel footprint"),
-        "filter": ("bilinear", "'nearest', 'bilinear' (Williams' interpolated depth) or 'pcf' (percentage closer)"),
+        "filter": ("nearest", "'nearest', 'bilinear' (Williams' interpolated depth) or 'pcf' (percentage closer)"),
         "pcf_size": (3, "texels per side of the percentage-closer filter (odd)"),
         "dither": (0, "1: Williams' +-0.5 texel noise on the transformed coordinates"),
         "seed": (0, "seed of the dither's hash"),
     }
 
-    def __init__(self, device, resolution=None, bias="normal", bias_scale=1.0, filter="bilinear", pcf_size=3,
+    def __init__(self, device, resolution=None, bias="normal", bias_scale=1.0, filter="nearest", pcf_size=3,
                  dither=0, seed=0):
         self.device = device
         self.resolution = None if resolution is None else positive_int("resolution", resolution, 1, MAX_RESOLUTION)

@@ -5,8 +5,11 @@ method's host code: it takes the light's depth maps and view records as plain ar
 ``ShadowMapMethod.prepare`` built, or maps from ``reference/raster.py``) and repeats the test:
 
 1. A receiver whose normal faces away from the light (``dot <= 0``) has visibility 0.
-2. Texel footprint ``T``: texel size times ``|d|^2 / (d . forward)`` in perspective (``d`` from the
-   eye; the texel's width across the ray at the receiver), the texel size orthographically.
+2. Texel footprint ``T``: the widest extent of one texel across the light's ray at the receiver. In
+   perspective that is the texel size (tangent units) times ``d . forward`` (``d`` from the eye): at
+   angle ``alpha`` off the view axis the texel is ``d . forward`` wide across the ray in the direction
+   perpendicular to the axis and the ray, and narrower by ``cos(alpha)`` in the other (see
+   :func:`texel_footprint`). Orthographically it is the texel size.
 3. Bias (``bias = (constant, slope)`` in texels): the receiver may lie ``constant T`` behind the stored
    surface; "slope" adds ``slope T min(tan theta, 16)``; "normal" lifts it ``slope T sin theta`` along its
    normal first. Without normals only the constant applies.
@@ -64,6 +67,21 @@ def texel_coordinates(points_rel: np.ndarray, record: np.ndarray, res: int):
     return (x + 1) * 0.5 * res - 0.5, (1 - y) * 0.5 * res - 0.5, z
 
 
+def texel_footprint(points_rel, eye, records, perspective):
+    """(N,) ``T``: the largest width across the light's ray of one texel at each point (relative to the maps' origin).
+
+    ``records`` (N, VIEW_FLOATS) is each point's view. Perspective, with ``d = p - eye``, ``z = d . forward``
+    and ``alpha`` the angle between ``d`` and the axis: a texel spans ``size`` in tangent units ``u = d.right / z``;
+    the ray's direction turns by ``size cos(alpha)`` radians for a step of ``u`` in the direction perpendicular
+    to the axis and the ray, by ``size cos(alpha)^2`` in the radial direction. At distance ``|d| = z / cos(alpha)``
+    the widths are ``size z`` and ``size z cos(alpha)``; the wider bounds where a lookup may land.
+    """
+    if not perspective:
+        return records[:, 16].copy()
+    forward = records[:, 12:15]   # the clip matrix's w row: w = (p - eye) . forward
+    return records[:, 16] * np.einsum("ij,ij->i", points_rel - eye, forward)
+
+
 def lit_fraction(depth_map, record, perspective, s, t, reach, filter, pcf_size=3):
     res = depth_map.shape[0]
 
@@ -105,12 +123,7 @@ def visibility(points_rel, normals, kind, to_light, views, depth, bias, bias_mod
         axis = np.argmax(np.abs(e), axis=1)             # ties: the lowest axis, as the kernel
         face = 2 * axis + (e[np.arange(n), axis] < 0)
     records = np.asarray(views, dtype=np.float64)[face]
-    if perspective:
-        e = p - to_light
-        w_axis = np.einsum("ij,ij->i", p, records[:, 12:15]) + records[:, 15]
-        texel = records[:, 16] * np.einsum("ij,ij->i", e, e) / w_axis
-    else:
-        texel = records[:, 16]
+    texel = texel_footprint(p, to_light, records, perspective)
     offset = bias[0] * texel
     facing = np.ones(n, dtype=bool)
     if normals is not None:
