@@ -127,3 +127,18 @@ __kernel void voxelize_level(__global const float *points, __global const uint *
     for (int c = 0; c < 4; ++c)
         r[16 + c] = ids[c];
 }
+
+/* Limit positions of `count` points: out[3 i .. 3 i + 2] = patch_eval of patch `patch[i]` at
+ * (uv[2 i], uv[2 i + 1]). The crack-free tessellation (voxelize.py: tessellate) samples patch sides with
+ * it to find which sides, or pieces of sides, are one curve. */
+__kernel void eval_points(global const float* points, global const uint* first, global const uint* levels,
+                          global const uint* patch, global const float* uv, int count, global float* out)
+{
+    const int i = get_global_id(0);
+    if (i >= count) return;
+    const uint p = patch[i];
+    const float3 x = patch_eval(points, first[p], levels[p], uv[2 * i], uv[2 * i + 1], 0, 0);
+    out[3 * i] = x.x;
+    out[3 * i + 1] = x.y;
+    out[3 * i + 2] = x.z;
+}

@@ -164,3 +164,68 @@ def test_shadow_mask_on_a_scene(device):
 def test_bad_parameters(device, kw, error, match):
     with pytest.raises(error, match=match):
         voxel.VoxelMethod(device, **kw)
+
+
+def test_leaf_visibility_rule():
+    states = np.array([[1, 1, 1, 1], [2, 1, 1, 1], [2, 1, 2, 1], [2, 2, 1, 2], [2, 2, 2, 2]])
+    assert voxel.leaf_visibility(states).tolist() == [1.0, 0.5, 0.25, 0.125, 0.0]
+
+
+def test_shaded_leaves_take_the_frame_buffer_states(device):
+    m = prepared(device, torus_on_ground(), LIGHTS["point"], "topology", resolution=32)
+    shaded = voxel.shade_leaves(m)
+    leaves = shaded.leaves
+    keys, values = voxel.sparse_states(m.vox.corner_voxels.ravel(), m.sample_states)
+    corner_states = values[np.searchsorted(keys, m.vox.corner_voxels)]          # (n, 4) voxel states
+    sample = leaves.vertex_sample
+    assert np.array_equal(shaded.vertex_state[sample >= 0], corner_states.ravel()[sample[sample >= 0]])
+    assert np.all(shaded.vertex_state[sample < 0] == 0)
+    shadowed = np.sum(corner_states == 2, axis=1)[leaves.face_leaf]
+    assert np.array_equal(shaded.face_visibility, np.where(shadowed == 4, 0.0, 0.5 ** shadowed).astype(np.float32))
+    assert np.any(shaded.face_visibility == 1.0) and np.any(shaded.face_visibility == 0.0)
+    assert np.any((shaded.face_visibility > 0) & (shaded.face_visibility < 1))     # the smooth transition
+    # without a frame buffer (section 5.1) the same states are determined again
+    again = voxel.shade_leaves(prepared(device, torus_on_ground(), LIGHTS["point"], "topology", resolution=32,
+                                        frame_buffer=False), leaves)
+    assert np.array_equal(again.face_visibility, shaded.face_visibility)
+
+
+BAND = 2   # pixels: the leaf mesh and the scene's tessellation are different polygons of one limit surface
+
+
+def test_render_leaves_matches_render(device):
+    """Section 5's rendering shadows the same regions as render(method="voxel") on the scene's own
+    tessellation: shadow masks differ only within BAND pixels of the reference's shadow boundary."""
+    from scipy import ndimage
+    from shadowcl.render import render_report
+
+    require_models()
+    scene = sc.Scene.load(SCENES / "subdivision" / "torus.toml")
+    width, height = 192, 108
+    ref = render_report(scene, "voxel", width, height, device=device, resolution=64)
+    new = voxel.render_leaves(scene, width, height, device=device, resolution=64)
+    assert new.image.shape == (height, width, 3) and new.visibility.shape == new.shadow.shape
+    assert np.sum(ref.covered != new.covered) <= 0.001 * width * height       # same silhouette
+    a, b = (np.zeros((height, width), bool) for _ in range(2))
+    a.ravel()[ref.receivers.pixel_index] = ref.shadow[0]
+    b.ravel()[new.receivers.pixel_index] = new.shadow[0]
+    both = ref.covered & new.covered
+    assert 0.03 < b[both].mean() < 0.5
+    boundary = a ^ ndimage.binary_erosion(a) | (ndimage.binary_dilation(a) & ~a)
+    band = ndimage.binary_dilation(boundary, iterations=BAND)
+    assert np.sum((a != b) & both & ~band) == 0
+    # shading: the shadowed pixels are darker than the lit ones of the same ground
+    lit = new.image.reshape(-1, 3)[new.receivers.pixel_index][new.visibility[0] == 1.0].mean()
+    dark = new.image.reshape(-1, 3)[new.receivers.pixel_index][new.visibility[0] == 0.0].mean()
+    assert dark < lit
+
+
+def test_leaf_rendering_bad_input(device):
+    with pytest.raises(TypeError, match="scene"):
+        voxel.render_leaves(torus_on_ground(), 32, 32, device=device)
+    with pytest.raises(RuntimeError, match="before prepare"):
+        voxel.shade_leaves(voxel.VoxelMethod(device, resolution=16))
+    m = prepared(device, torus_on_ground(), LIGHTS["point"], "topology", resolution=16)
+    other = vz.voxelize(device, torus_on_ground(), 32).tessellate()
+    with pytest.raises(ValueError, match="leaves"):
+        voxel.shade_leaves(m, other)

@@ -6,6 +6,7 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from shadowcl import voxelize as vz
+from shadowcl.geometry import Mesh
 from shadowcl.reference import voxelize as ref
 from shadowcl.subdivision import SubdivisionSurface
 
@@ -240,3 +241,101 @@ def test_grid_bounds_fix_the_grid(device):
 def test_bad_input(device, call, error, match):
     with pytest.raises(error, match=match):
         call(device, vz.grid_patch_table(torus_net(), True, True))
+
+
+def oriented_edges(mesh):
+    """Directed edges of ``mesh`` after welding equal vertex positions, and the welded vertex count."""
+    welded, index = np.unique(mesh.vertices, axis=0, return_inverse=True)
+    f = index.ravel()[mesh.faces]
+    return np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), len(welded)
+
+
+def closed_and_oriented(edges) -> bool:
+    """Every edge has exactly two faces, which run along it in opposite directions."""
+    directed, count = np.unique(edges, axis=0, return_counts=True)
+    reverse = np.unique(edges[:, ::-1], axis=0)
+    return bool(np.all(count == 1) and len(directed) == len(reverse) and np.array_equal(directed, reverse))
+
+
+@pytest.mark.parametrize("resolution", [16, 47])
+@pytest.mark.parametrize("shape, euler", [("torus", 0), ("catmark_cube", 2), ("catmark_pyramid", 2)])
+def test_leaf_mesh_is_crack_free(device, shape, euler, resolution):
+    """Section 5.3: leaves of mixed depth tessellate into a closed, consistently oriented mesh, while two
+    triangles per leaf alone leave T-junction cracks. The pyramid's table has patches of two sizes (a
+    side of one is half a side of its neighbour)."""
+    if shape == "torus":
+        table = vz.grid_patch_table(torus_net(), True, True)
+    else:
+        table = SubdivisionSurface.load(require_models() / "ccss" / f"{shape}.obj").patch_table(device)
+    vox = vz.voxelize(device, table, resolution)
+    assert len(np.unique(vox.level)) >= 2                      # mixed depths occur
+    leaves = vox.tessellate()
+    mesh = leaves.mesh
+    edges, nvertices = oriented_edges(mesh)
+    assert nvertices == len(mesh.vertices)                     # no two vertices at one position
+    assert closed_and_oriented(edges)
+    assert nvertices - len(edges) // 2 + len(mesh.faces) == euler
+    assert leaves.stats["polygons"] > 0 and leaves.stats["inserted"] > 0
+    # evaluations of one point by two patches differ only by float32 rounding (a wrong side mapping
+    # across patches would weld points a leaf apart)
+    assert leaves.stats["weld_spread"] < 1e-3
+    # the sides found to be one curve are those the table says have a neighbour
+    a, b, _, span = vz.matching_sides(vox)
+    matched = np.zeros(4 * len(table.first), bool)
+    matched[np.concatenate([a, b])] = True
+    assert np.array_equal(matched, np.asarray(table.neighbors).ravel() >= 0)
+    assert leaves.stats["open_sides"] == 0
+    # outward (du x dv) orientation: positive enclosed volume
+    a, b, c = (mesh.vertices[mesh.faces[:, k]].astype(np.float64) for k in range(3))
+    assert np.einsum("ij,ij->i", a, np.cross(b, c)).sum() > 0
+    # every triangle belongs to a leaf and every sample vertex is its leaf corner's position
+    sample = leaves.vertex_sample
+    assert np.array_equal(np.unique(leaves.face_leaf), np.arange(vox.nleaves))
+    corners = vox.corners.reshape(-1, 3)
+    assert np.all(np.abs(mesh.vertices[sample >= 0] - corners[sample[sample >= 0]]) == 0)
+    # without crack elimination (two triangles per leaf, corners welded) edges are left with one face
+    naive = Mesh(corners, (4 * np.arange(vox.nleaves)[:, None, None] + np.array([[0, 1, 2], [0, 2, 3]])).reshape(-1, 3))
+    assert not closed_and_oriented(oriented_edges(naive)[0])
+
+
+def test_eval_points_match_reference(device, rng):
+    table = SubdivisionSurface.load(require_models() / "ccss" / "catmark_pyramid.obj").patch_table(device)
+    vox = vz.voxelize(device, table, 8)
+    patch = rng.integers(0, len(table.first), 2000)
+    u, v = rng.random(2000), rng.random(2000)
+    u[:100], v[:100] = 0.0, 0.0                            # the extraordinary vertex itself
+    u[100:200] = 1.0
+    got = vox.evaluate(patch, u, v)
+    want = ref.patch_eval(table.points, table.first, table.levels, patch, u.astype(np.float32), v.astype(np.float32))
+    # float32: 16 control points of magnitude ~1 rounded to 2^-24 each, the basis too
+    assert np.abs(got - want).max() < 1e-5
+    with pytest.raises(ValueError, match="u, v"):
+        vox.evaluate([0], [1.5], [0.0])
+    with pytest.raises(ValueError, match="patch"):
+        vox.evaluate([len(table.first)], [0.5], [0.5])
+
+
+def test_open_surface_boundary_is_the_table_boundary(device):
+    """On an open surface (the tent) only the table's boundary sides stay open: every one-face edge of
+    the leaf mesh lies on one."""
+    table = SubdivisionSurface.load(require_models() / "ccss" / "catmark_tent.obj").patch_table(device)
+    vox = vz.voxelize(device, table, 24)
+    leaves = vox.tessellate()
+    assert leaves.stats["open_sides"] == int(np.sum(np.asarray(table.neighbors) < 0)) > 0
+    f = leaves.mesh.faces
+    assert oriented_edges(leaves.mesh)[1] == len(leaves.mesh.vertices)     # so mesh indices are welded ones
+    edges = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    undirected, count = np.unique(np.sort(edges, axis=1), axis=0, return_counts=True)
+    assert set(count.tolist()) == {1, 2}
+    # a one-face edge joins two vertices on a boundary side: samples at u or v = 0 or 1 of a patch
+    # whose side there has no neighbour
+    sample = leaves.vertex_sample[undirected[count == 1]].ravel()
+    assert np.all(sample >= 0)
+    leaf, corner = sample // 4, sample % 4
+    rect = vox.rect[leaf]
+    u = rect[:, 0] + rect[:, 2] * np.isin(corner, (1, 2))
+    v = rect[:, 1] + rect[:, 3] * np.isin(corner, (2, 3))
+    nb = np.asarray(table.neighbors)[vox.patch[leaf]]
+    on_open = (((v == 0) & (nb[:, 0] < 0)) | ((u == 1) & (nb[:, 1] < 0)) | ((v == 1) & (nb[:, 2] < 0))
+               | ((u == 0) & (nb[:, 3] < 0)))
+    assert np.all(on_open)

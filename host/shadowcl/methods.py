@@ -25,6 +25,9 @@ Two optional parts of the protocol:
   ``classify`` with the camera's ``View``, its ``raster.ZBuffer`` and ``raster.Receivers``; it returns the
   bool mask of the covered pixels in ``seen``'s order, for methods that work in image space (a
   stencil, scan-line runs).
+- ``render_report(scene, width, height, device=, eps=, **params)`` (a static method):
+  :func:`shadowcl.render` hands the whole image to it, for methods that draw their own geometry (the
+  voxel method's crack-free leaves, shaded 1/2^n per shadowed corner).
 """
 
 from __future__ import annotations

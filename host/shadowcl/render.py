@@ -19,7 +19,7 @@ from . import raster
 from .checks import non_negative_float, positive_int
 from .device import get_device
 from .geometry import bounds_diagonal
-from .methods import create_method, default_eps, occluders, with_receiver_count
+from .methods import create_method, default_eps, method_class, occluders, with_receiver_count
 from .scene import Scene
 
 AMBIENT = 0.18
@@ -80,6 +80,11 @@ def render_report(scene, method: str = "exact", width=None, height=None, device=
     if not isinstance(scene, Scene):
         raise TypeError(f"scene: expected a shadowcl.Scene, got {type(scene).__name__}")
     post_filter = positive_int("post_filter", post_filter, minimum=0, maximum=MAX_SIDE)
+    own_renderer = getattr(method_class(method), "render_report", None)
+    if own_renderer is not None:   # a method that draws its own geometry (the voxel method's leaves)
+        if post_filter:
+            raise ValueError(f"post_filter: method {method!r} renders its own geometry and has no post-filter")
+        return own_renderer(scene, width, height, device=device, eps=eps, **params)
     device = get_device(device)
     width, height = render_size(scene, width, height)
     timings: dict[str, float] = {}
@@ -112,7 +117,7 @@ def render_report(scene, method: str = "exact", width=None, height=None, device=
     with stage("shading"):
         if post_filter:
             visibility = np.stack([_box_filter(seen, v, post_filter) for v in visibility])
-        image = _shade(scene, view, seen, visibility)
+        image = shade(scene.triangle_colors, scene.lights, view, seen, visibility)
     return RenderResult(image=image, receivers=seen, shadow=shadow, visibility=visibility, timings=timings)
 
 
@@ -140,10 +145,12 @@ def _box_filter(seen, values: np.ndarray, k: int) -> np.ndarray:
     return (sums.ravel()[seen.pixel_index] / counts.ravel()[seen.pixel_index]).astype(np.float32)
 
 
-def _shade(scene, view, seen, visibility: np.ndarray) -> np.ndarray:
-    colors = scene.triangle_colors[seen.triangle]
+def shade(triangle_colors: np.ndarray, lights, view, seen, visibility: np.ndarray) -> np.ndarray:
+    """The image: each covered pixel of ``seen`` coloured ``triangle_colors[its triangle]`` (linear RGB) times
+    ambient + Lambert per light scaled by ``visibility`` ((L, M), one row per light), over the background."""
+    colors = triangle_colors[seen.triangle]
     light_sum = np.zeros(len(seen.points))
-    for light, lit in zip(scene.lights, visibility):
+    for light, lit in zip(lights, visibility):
         to_light = light.direction_to_light(seen.points)
         to_light /= np.linalg.norm(to_light, axis=1, keepdims=True)
         lambert = np.clip(np.einsum("ij,ij->i", seen.normals, to_light), 0.0, None)

@@ -34,6 +34,13 @@ occupied (voxel.cl later rewrites occupied voxels to 1 = lit or 2 = shadowed). W
 the device (``frame_buffer=None`` decides) the leaves alone are kept (the paper's section 5.1 mode)
 and :attr:`Voxelization.occupied` is rebuilt from them.
 
+**Crack-free tessellation** (section 5.3, :func:`tessellate`, ``vox.tessellate()``): the leaves as a
+triangle mesh for rendering, two triangles per leaf, or where neighbouring leaves are deeper (inside a
+patch, or across patches, including patches refined further than their neighbours) the polygon through
+every evaluated point on its boundary, fanned from its centre. Closed surfaces give closed, consistently
+oriented meshes (tests/test_voxelize.py: torus, cube, pyramid; measured on every ccss model and suzanne
+at 32^3 and 128^3: edges with one face only along the table's boundary sides).
+
 **Fixed capacities.** Each level's child queue and the leaf array have a capacity; the kernel counts
 what it wanted, the host grows the buffer to the counted size and reruns the level.
 """
@@ -45,8 +52,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pyopencl as cl
+from scipy import sparse
+from scipy.sparse import csgraph
+from scipy.spatial import cKDTree
 
 from .checks import check_bounds, positive_int
+from .geometry import Mesh
 
 CONNECTIVITIES = (6, 18, 26)
 MAX_RESOLUTION = 1024      # linear voxel indices (i * R + j) * R + k are 32-bit (kernels/voxelize.cl)
@@ -74,6 +85,8 @@ class Voxelization:
     frame_dev: cl.Buffer | None = field(repr=False)
     device: object = field(repr=False)
     stats: dict = field(default_factory=dict)
+    table_dev: tuple = field(default=(), repr=False)     # the patch table's points, first, levels on the device
+    npatches: int = 0
 
     @property
     def nleaves(self) -> int:
@@ -120,6 +133,30 @@ class Voxelization:
             flat[self.corner_voxels.ravel()] = True
             return flat.reshape(R, R, R)
         return (unpack_states(words, R ** 3) != 0).reshape(R, R, R)
+
+    def evaluate(self, patch, u, v) -> np.ndarray:
+        """(N, 3) float32 limit positions of patches ``patch`` at parameters (``u``, ``v``) in [0, 1]
+        (kernels/voxelize.cl eval_points on the voxelized table)."""
+        patch = np.ascontiguousarray(patch, dtype=np.int64).ravel()
+        uv = np.ascontiguousarray(np.stack(np.broadcast_arrays(np.ravel(u), np.ravel(v)), axis=1), dtype=np.float32)
+        if len(patch) != len(uv):
+            raise ValueError(f"patch: {len(patch)} ids for {len(uv)} parameters")
+        if len(patch) and (patch.min() < 0 or patch.max() >= self.npatches):
+            raise ValueError(f"patch: ids must be in [0, {self.npatches})")
+        if not np.all((uv >= 0) & (uv <= 1)):
+            raise ValueError("u, v: parameters must be in [0, 1]")
+        if len(patch) == 0:
+            return np.zeros((0, 3), np.float32)
+        dev = self.device
+        out = dev.empty(12 * len(patch), "evaluated points")
+        dev.kernel("voxelize.cl", "eval_points")(dev.queue, (len(patch),), None, *self.table_dev,
+                                                 dev.to_device(patch.astype(np.uint32)), dev.to_device(uv),
+                                                 np.int32(len(patch)), out)
+        return dev.from_device(out, (len(patch), 3), np.float32)
+
+    def tessellate(self) -> "LeafMesh":
+        """The leaves as a crack-free triangle mesh (section 5.3, :func:`tessellate`)."""
+        return tessellate(self)
 
     def voxel_of(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(N, 3) int64 voxel coordinates of world ``points`` and a bool (N,) "inside the grid" mask."""
@@ -264,7 +301,8 @@ def voxelize(device, surface_or_table, resolution: int, connectivity: int = 26,
                  forced_leaves=forced, levels=level, reruns=reruns, per_level=per_level, voxelize_s=elapsed,
                  frame_buffer=bool(frame_buffer), frame_bytes=frame_bytes if frame_buffer else 0,
                  leaf_bytes=4 * LEAF_WORDS * nleaves, subpatches=int(sum(n for _, n, _ in per_level)))
-    return Voxelization(resolution, connectivity, origin, size, leaves, leaves_g, frame_dev, dev, stats)
+    return Voxelization(resolution, connectivity, origin, size, leaves, leaves_g, frame_dev, dev, stats,
+                        (points_g, first_g, levels_g), npatch)
 
 
 @dataclass(frozen=True)
@@ -337,3 +375,211 @@ def grid_patch_table(net, wrap_u: bool = False, wrap_v: bool = False) -> Patches
     neighbors = np.stack([index(a, b - 1), index(a + 1, b), index(a, b + 1), index(a - 1, b)], axis=-1)
     return Patches(points, (16 * np.arange(count)).astype(np.uint32), np.zeros(count, np.uint32),
                           neighbors.reshape(-1, 4).astype(np.int32))
+
+
+# Crack-free tessellation of the leaves (section 5.3) ------------------------------------------------
+
+# Side s of a patch runs from corner SIDE_ENDS[s][0] to SIDE_ENDS[s][1] as its parameter t grows (corners
+# 0..3 at (u, v) = (0, 0), (1, 0), (1, 1), (0, 1); side 0: v = 0, 1: u = 1, 2: v = 1, 3: u = 0, t = u on
+# sides 0 and 2, t = v on sides 1 and 3).
+SIDE_ENDS = np.array([(0, 1), (1, 2), (3, 2), (0, 3)])
+# voxels: two patch sides are one curve when their samples are this close. Two evaluations of one limit
+# point by different patches differ by float32 rounding (measured <= 7e-5 voxel up to 128^3 on the
+# ccss models and suzanne); distinct corners are at least a leaf apart (leaves shorter than 1/64 voxel
+# are forced, stats["forced_leaves"]).
+SIDE_MATCH = 1e-2
+# Patches may be refined further than their neighbours (the table's ``domain``): a side can be a piece of
+# a neighbour's side. Sides are sampled at 2^SIDE_LOG + 1 points; pieces down to 2^-SIDE_LOG are found.
+SIDE_LOG = 4
+
+
+def matching_sides(vox: Voxelization) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Pairs of patch sides that are one curve: side ``a`` (4 patch + side) is the piece of side ``b``
+    from t = ``start`` / 2^SIDE_LOG, running ``span`` / 2^SIDE_LOG (negative: against b's direction) as a's
+    parameter goes 0 -> 1. Found geometrically: a's end corners lie on b's samples (within SIDE_MATCH
+    voxels) and so do a's samples that fall on b's (every sample when the sides are equal, every other
+    one for a half, ...); ``span`` is a power of two, positive or negative. Returned int64 arrays."""
+    npatch, count = vox.npatches, (1 << SIDE_LOG) + 1
+    t = np.linspace(0.0, 1.0, count)
+    side_u = np.stack([t, np.ones(count), t, np.zeros(count)])             # (4, count): side s at sample j
+    side_v = np.stack([np.zeros(count), t, np.ones(count), t])
+    patch = np.repeat(np.arange(npatch), 4 * count)
+    points = vox.evaluate(patch, np.tile(side_u.ravel(), npatch), np.tile(side_v.ravel(), npatch))
+    points = points.astype(np.float64).reshape(4 * npatch, count, 3)
+    tol = SIDE_MATCH * vox.voxel_size
+    tree = cKDTree(points.reshape(-1, 3))
+    ends = []
+    for j in (0, count - 1):                       # (side a, side b, sample of b) for a's start, a's end
+        hits = cKDTree(points[:, j]).sparse_distance_matrix(tree, tol, output_type="ndarray")
+        hit = np.stack([hits["i"], hits["j"] // count, hits["j"] % count], axis=1).astype(np.int64)
+        # short sides have several samples within tol of a point: keep the nearest per (a, b)
+        order = np.lexsort((hits["v"], hit[:, 1], hit[:, 0]))
+        hit = hit[order]
+        first = np.ones(len(hit), bool)
+        first[1:] = np.any(hit[1:, :2] != hit[:-1, :2], axis=1)
+        ends.append(hit[first])
+    start, end = ends
+    # join a's start and end hits on (a, b)
+    key_s, key_e = start[:, 0] * 4 * npatch + start[:, 1], end[:, 0] * 4 * npatch + end[:, 1]
+    if len(key_e) == 0:
+        return (np.zeros(0, np.int64),) * 4
+    order = np.argsort(key_e, kind="stable")
+    at = np.clip(np.searchsorted(key_e[order], key_s), 0, len(key_e) - 1)
+    found = key_e[order][at] == key_s
+    a, b, j0 = start[found, 0], start[found, 1], start[found, 2]
+    j1 = end[order][at][found, 2]
+    span = j1 - j0
+    power = (span != 0) & ((np.abs(span) & (np.abs(span) - 1)) == 0) & (a != b)
+    a, b, j0, span = a[power], b[power], j0[power], span[power]
+    # a's samples that land on b's samples must coincide with them
+    i = np.arange(count)
+    num = j0[:, None] * (count - 1) + i[None] * span[:, None]              # b's t in units of 2^-2 SIDE_LOG
+    on = num % (count - 1) == 0
+    jb = np.where(on, num // (count - 1), 0)
+    gap = np.linalg.norm(points[a][:, i] - points[b[:, None], jb], axis=2)
+    ok = np.all(~on | (gap <= tol), axis=1)
+    return a[ok], b[ok], j0[ok], span[ok]
+
+
+@dataclass(frozen=True)
+class LeafMesh:
+    """The leaf subpatches as one triangle mesh (:func:`tessellate`).
+
+    ``mesh``: vertices are the leaves' corners (one per point of the surface: shared corners and the
+    corners of a patch's neighbours are one vertex) followed by one centre vertex per leaf that needed
+    crack elimination. ``face_leaf`` (F,) int64: the leaf each triangle belongs to. ``vertex_sample`` (V,)
+    int64: the sample (4 * leaf + corner, :attr:`Voxelization.corners` flattened) a vertex's position
+    came from, -1 for centre vertices. ``stats``: ``polygons`` (leaves with inserted points),
+    ``inserted`` (points inserted into leaf boundaries), ``weld_spread`` (voxels: the largest distance
+    between the evaluations of one surface point by different patches, which are one vertex here),
+    ``side_pairs`` (side pieces found to be one curve, :func:`matching_sides`), ``open_sides`` (patch
+    sides matched with none: the surface's boundary), ``vertices``, ``triangles``.
+    """
+
+    mesh: Mesh
+    face_leaf: np.ndarray
+    vertex_sample: np.ndarray
+    stats: dict
+    leaves: np.ndarray = field(repr=False)      # the voxelization's leaf records it tessellates
+
+
+def tessellate(vox: Voxelization) -> LeafMesh:
+    """Tessellate the leaves of ``vox`` without cracks (Lai & Cheng section 5.3).
+
+    A leaf is two triangles when no other leaf has a corner on its boundary; otherwise its boundary is
+    the polyline through every evaluated point on it (the paper's polygon A1 A2 C4 B4 A5 A6) and the
+    polygon is fanned from its centre (the mean of its four corners), which leaves no sliver triangles.
+    Points on a leaf's side are found exactly in integer parameter coordinates: inside a patch directly,
+    across patches through the side pieces that are one curve (:func:`matching_sides`: equal sides
+    either way round, or a side that is a dyadic piece of a larger neighbour's side), which map a side
+    parameter to the neighbour's. Found from the surface itself, so the table's ``neighbors`` are not
+    needed (tests compare the two). Every evaluation of one surface point (a corner shared by leaves of
+    several patches) becomes one vertex, at the position of the lowest-numbered sample. Raises
+    ValueError when the parameter keys (patches x (2^(depth + SIDE_LOG) + 1)^2) overflow 62 bits.
+    """
+    n = vox.nleaves
+    if n == 0:
+        raise ValueError("vox: no leaves to tessellate")
+    leaves = vox.leaves.astype(np.int64)
+    patch, level, iu, iv = leaves[:, 0], leaves[:, 1], leaves[:, 2], leaves[:, 3]
+    npatch = vox.npatches
+    depth = int(level.max()) + SIDE_LOG           # sub-sides of 2^-SIDE_LOG map to integers too
+    S = 1 << depth                                # integer parameter coordinates: [0, S] per patch
+    W = S + 1
+    if npatch * W * W >= 2 ** 62:
+        raise ValueError(f"vox: {npatch} patches at depth {depth} overflow 64-bit parameter keys")
+    step = S >> level
+    u0, v0 = iu * step, iv * step
+    cu = np.stack([u0, u0 + step, u0 + step, u0], axis=1).ravel()          # corner order of the leaf record
+    cv = np.stack([v0, v0, v0 + step, v0 + step], axis=1).ravel()
+    cp = np.repeat(patch, 4)
+    positions = vox.corners.reshape(-1, 3).astype(np.float64)
+    a, b, start, span = matching_sides(vox)
+    tstart, tspan = start * (S >> SIDE_LOG), span                  # side b's t = tstart + t_a * span / 2^SIDE_LOG
+
+    # Leaf corners on a patch side, carried to the same point on every side piece matched with it:
+    # forward (a's point onto b) and back (b's points within a's piece onto a)
+    sample, side = np.nonzero(np.stack([cv == 0, cu == S, cv == S, cu == 0], axis=1))
+    t = np.where(side % 2 == 0, cu[sample], cv[sample])
+    flat = 4 * cp[sample] + side
+    order = np.argsort(flat, kind="stable")
+    sample, side, t, flat = sample[order], side[order], t[order], flat[order]
+    into_s, into_side, into_t = [], [], []
+    for src, dst, forward in ((a, b, True), (b, a, False)):
+        lo, hi = np.searchsorted(flat, src, "left"), np.searchsorted(flat, src, "right")
+        pair = np.repeat(np.arange(len(src)), hi - lo)
+        at = np.arange(len(pair)) - np.repeat(np.cumsum(hi - lo) - (hi - lo), hi - lo) + lo[pair]
+        if forward:
+            mapped = tstart[pair] + ((t[at] * tspan[pair]) >> SIDE_LOG)
+        else:
+            mapped = ((t[at] - tstart[pair]) << SIDE_LOG) // tspan[pair]
+        keep = (mapped >= 0) & (mapped <= S)
+        into_s.append(sample[at][keep])
+        into_side.append(dst[pair][keep])
+        into_t.append(mapped[keep])
+    linked = np.concatenate(into_s)
+    q, s2, t = np.concatenate(into_side) // 4, np.concatenate(into_side) % 4, np.concatenate(into_t)
+    mu = np.choose(s2, [t, np.full_like(t, S), t, np.zeros_like(t)])
+    mv = np.choose(s2, [np.zeros_like(t), t, np.full_like(t, S), t])
+
+    # Points = unique (patch, u, v) keys; one vertex per connected set of keys naming one surface point
+    def vkey(p, u, v):
+        return (p * W + u) * W + v
+
+    keys, inverse = np.unique(np.concatenate([vkey(cp, cu, cv), vkey(q, mu, mv)]), return_inverse=True)
+    links = sparse.coo_matrix((np.ones(len(linked)), (inverse[linked], inverse[4 * n:])), shape=(len(keys),) * 2)
+    count, label = csgraph.connected_components(links, directed=False)
+    first_sample = np.full(count, 4 * n, np.int64)
+    np.minimum.at(first_sample, label[inverse[:4 * n]], np.arange(4 * n))
+    vertices = positions[first_sample]
+    spread = np.linalg.norm(positions - vertices[label[inverse[:4 * n]]], axis=1).max() / vox.voxel_size
+
+    # The points strictly inside each leaf side, in polygon order (sides 2 and 3 run backwards)
+    kp, ku, kv = keys // (W * W), keys // W % W, keys % W
+    horizontal = np.argsort((kp * W + kv) * W + ku)
+    vertical = np.arange(len(keys))                       # keys are sorted by (patch, u, v) already
+    hsorted = ((kp * W + kv) * W + ku)[horizontal]
+    order = np.concatenate([label[horizontal], label[vertical]])
+    u1, v1 = u0 + step, v0 + step
+    lo = np.stack([np.searchsorted(hsorted, (patch * W + v0) * W + u0, "right"),
+                   len(keys) + np.searchsorted(keys, vkey(patch, u1, v0), "right"),
+                   np.searchsorted(hsorted, (patch * W + v1) * W + u0, "right"),
+                   len(keys) + np.searchsorted(keys, vkey(patch, u0, v0), "right")], axis=1)
+    hi = np.stack([np.searchsorted(hsorted, (patch * W + v0) * W + u1, "left"),
+                   len(keys) + np.searchsorted(keys, vkey(patch, u1, v1), "left"),
+                   np.searchsorted(hsorted, (patch * W + v1) * W + u1, "left"),
+                   len(keys) + np.searchsorted(keys, vkey(patch, u0, v1), "left")], axis=1)
+    inserted = hi - lo                                                    # (n, 4)
+    corner_vertex = label[inverse[:4 * n]].reshape(n, 4)
+    plain = inserted.sum(axis=1) == 0
+    faces = [corner_vertex[plain][:, [0, 1, 2]], corner_vertex[plain][:, [0, 2, 3]]]
+    face_leaf = [np.flatnonzero(plain)] * 2
+
+    poly = np.flatnonzero(~plain)
+    if len(poly):
+        ins = inserted[poly]                                              # (m, 4)
+        size = 4 + ins.sum(axis=1)
+        start = np.concatenate([[0], np.cumsum(size)[:-1]])
+        side_start = start[:, None] + np.arange(4)[None] + np.concatenate(
+            [np.zeros((len(poly), 1), np.int64), np.cumsum(ins, axis=1)[:, :-1]], axis=1)
+        ring = np.empty(int(size.sum()), np.int64)
+        ring[side_start.ravel()] = corner_vertex[poly].ravel()
+        c = ins.ravel()
+        edge = np.repeat(np.arange(len(c)), c)
+        j = np.arange(int(c.sum())) - np.repeat(np.cumsum(c) - c, c)
+        forward = edge % 4 < 2
+        slot = np.where(forward, j, c[edge] - 1 - j)
+        ring[side_start.ravel()[edge] + 1 + slot] = order[lo[poly].ravel()[edge] + j]
+        owner = np.repeat(np.arange(len(poly)), size)
+        nxt = np.arange(len(ring)) + 1
+        nxt[np.cumsum(size) - 1] = start
+        centre = len(vertices) + owner
+        faces.append(np.stack([centre, ring, ring[nxt]], axis=1))
+        face_leaf.append(poly[owner])
+        vertices = np.concatenate([vertices, vox.corners[poly].astype(np.float64).mean(axis=1)])
+    vertex_sample = np.concatenate([first_sample, np.full(len(poly), -1, np.int64)])
+    mesh = Mesh(vertices, np.concatenate(faces))
+    stats = dict(polygons=len(poly), inserted=int(inserted.sum()), weld_spread=float(spread),
+                 side_pairs=len(a), open_sides=4 * npatch - len(np.union1d(a, b)),
+                 vertices=len(vertices), triangles=len(mesh.faces))
+    return LeafMesh(mesh, np.concatenate(face_leaf), vertex_sample, stats, vox.leaves)
