@@ -280,6 +280,9 @@ def test_bad_level_errors_input_is_named(device):
         lod.level_errors(device, mesh, LIGHT, np.zeros((4, 3)), np.ones((3, 3)), 1e-3)
     with pytest.raises(TypeError, match=r"levels\[1\]"):
         lod.level_errors(device, mesh, LIGHT, np.zeros((4, 3)), None, 1e-3, levels=[mesh, "coarse"])
+    # regression: calibrate read a bad light's attributes (AttributeError) before checking it
+    with pytest.raises(TypeError, match="light: expected a PointLight"):
+        lod.calibrate(device, mesh, (0, 1, 0), [[-1, 0, -1], [1, 1, 1]], 1e-3, 1e-3)
 
 
 # bench/table2.py ----------------------------------------------------------------------------------

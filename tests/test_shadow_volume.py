@@ -19,6 +19,7 @@ from shadowcl.reference import shadow_volume as reference
 from shadowcl.reference.silhouette import tie_faces
 from shadowcl.render import camera_view, render_report
 from shadowcl.shadow_volume import ShadowVolumeMethod, two_sided
+from shadowcl.silhouette import silhouette_edges
 
 from conftest import SCENES, require_models
 
@@ -280,6 +281,17 @@ def test_camera_inside_a_volume(device):
     assert result.shadow.any() and not result.shadow.all()
 
 
+def test_eye_winding_through_an_edge_two_cap_faces_share(device):
+    """Regression: the eye straight under the light, so its segment to the light passes through the
+    diagonal the plate's top (and bottom) square is split along; counted along that segment through the
+    caps the eye's winding number came out 2, and z-pass drew false shadow wherever the count is 1 short
+    of it. Along a ray that grazes no edge it is 1."""
+    scene = plate_scene((0.0, 1.0, 0.0))
+    method = prepared(device, scene.mesh, scene.lights[0], scene.bounds)
+    assert method._eye_winding(camera_view(scene, 64, 36)) == 1
+    assert_render_matches_exact(scene, device, ("zpass",))
+
+
 def test_zpass_refuses_a_near_plane_cutting_a_volume(device):
     """The eye within the near plane's reach of the plate's side volume face: z-pass would lose the
     cut-off part, so it is refused by name; z-fail renders it right."""
@@ -289,6 +301,28 @@ def test_zpass_refuses_a_near_plane_cutting_a_volume(device):
     with pytest.raises(ValueError, match=r"stencil='zpass': the camera's near plane may cut \d+ shadow-volume"):
         render_report(scene, method="shadow_volume", width=32, height=18, device=device, stencil="zpass")
     assert_render_matches_exact(scene, device, ("zfail",))
+
+
+def test_stencil_refuses_receivers_beyond_the_far_cap(device):
+    """Regression: prepared with receiver_bounds around the plate only, the volume is truncated short of
+    the far ground the camera sees, which the stencil silently left lit; now refused by name, while
+    classify (the per-point count, independent of the extrusion) still gives the exact answer there."""
+    scene = plate_scene((0.3, 1.0, 0.2))
+    light = scene.lights[0]
+    box = np.array([[-1.5, 2.85, -1.5], [1.5, 3.15, 1.5]])
+    method = prepared(device, scene.mesh, light, box)
+    view = camera_view(scene, 64, 36)
+    zbuffer = raster.rasterize(device, scene.mesh, view)
+    seen = raster.receivers(device, scene.mesh, view, zbuffer)
+    assert not method.volume.reaches(light, seen.points)
+    with pytest.raises(ValueError, match="seen: pixels lie beyond the shadow volume's far cap"):
+        method.classify_view(view, zbuffer, seen)
+    eps = default_eps(scene.mesh.bounds)
+    truth = exact_ref.shadow_mask(scene.mesh.vertices, scene.mesh.faces, light, seen.points, seen.normals, eps=eps)
+    differ = np.flatnonzero(method.classify(seen.points, seen.normals) != truth)
+    band = 2e-6 * bounds_diagonal(scene.bounds)            # the exact method's float32 band (test_render.py)
+    assert np.all(exact_ref.segment_edge_distance(scene.mesh.vertices, scene.mesh.faces, light, seen.points[differ],
+                                                  seen.normals[differ], eps) < band)
 
 
 def test_model_scene_renders_like_exact(device):
@@ -317,6 +351,27 @@ def test_open_bowl_shadows_through_its_inside(device, rng):
     band = 2e-6 * bounds_diagonal(mesh.bounds)            # the exact method's float32 band (test_render.py)
     near = exact_ref.segment_edge_distance(mesh.vertices, mesh.faces, light, points, normals) < band
     assert not np.any((mask != truth) & ~near)
+
+
+@pytest.mark.parametrize("inverted", [False, True], ids=["outward", "inward"])
+def test_point_light_inside_a_closed_ball(device, rng, inverted):
+    """Regression: a point light inside a closed ball (wound outward) faces none of its faces, and the
+    one-sided volume cast no shadow at all where the exact answer shadows everything outside. The
+    light's winding number is nonzero (-1 wound inward, where every face faces the light and one side
+    would do; two-sided is right for both), so the frame goes two-sided."""
+    ball = icosphere(2)
+    faces = ball.faces[:, ::-1] if inverted else ball.faces
+    ground = sc.Mesh([[-4, -1.2, -4], [4, -1.2, -4], [4, -1.2, 4], [-4, -1.2, 4]], [[0, 2, 1], [0, 3, 2]])
+    mesh = sc.Mesh.concatenate([sc.Mesh(ball.vertices, faces), ground])
+    light = sc.PointLight((0.1, 0.2, -0.05))
+    method = prepared(device, mesh, light, mesh.bounds)
+    assert method.stats["light_inside_closed"]
+    points = np.c_[rng.uniform(-4, 4, 1000), np.full(1000, -1.2), rng.uniform(-4, 4, 1000)]
+    points = np.concatenate([points, rng.uniform(-0.4, 0.4, (200, 3))])       # and inside the ball
+    eps = default_eps(mesh.bounds)
+    truth = exact_ref.shadow_mask(mesh.vertices, mesh.faces, light, points, eps=eps)
+    assert truth[:1000].all() and not truth[1000:].any()
+    assert np.array_equal(method.classify(points), truth)
 
 
 def test_two_sided_cache_keeps_no_mesh_alive(rng):
@@ -385,8 +440,11 @@ def test_tracked_silhouettes_keep_one_tracker_and_give_the_brute_force_volume(de
         brute.prepare(mesh, light, box, 1e-4)
         trackers.add(id(tracked._tracker))
         # Edges the tracker missed (the randomized search may miss whole loops) are counted and the frame
-        # redone by brute force: the volume is always the closed one.
-        assert tracked.stats["silhouettes_missed"] >= 0
+        # redone by brute force: the volume is always the closed one. The tracker reports no wrong edge.
+        found = tracked.tracked_silhouette
+        full = silhouette_edges(device, found.adjacency, light)
+        assert np.isin(found.indices, full.indices).all()
+        assert tracked.stats["silhouettes_missed"] == len(full.indices) - len(found.indices)
         assert np.array_equal(canonical(tracked.volume.mesh.faces), canonical(brute.volume.mesh.faces))
         assert np.array_equal(tracked.classify(points), brute.classify(points))
     assert len(trackers) == 1
@@ -395,7 +453,7 @@ def test_tracked_silhouettes_keep_one_tracker_and_give_the_brute_force_volume(de
 def test_missed_silhouettes_are_counted(device, rng):
     """A silhouette with one edge dropped is short by exactly that edge (the volume would be open)."""
     from shadowcl.shadow_volume import _missing_silhouettes
-    from shadowcl.silhouette import Silhouette, silhouette_edges
+    from shadowcl.silhouette import Silhouette
     full = silhouette_edges(device, blobs(rng, True), LIGHTS["point"])
     assert _missing_silhouettes(full) == 0
     codes = full.codes.copy()

@@ -334,6 +334,7 @@ def calibrate(device, mesh: Mesh, light, receiver_bounds, eps: float, max_error:
     """Measure every level of ``mesh`` on a calibration sample (:func:`calibration_sample` of
     :func:`sample_size` receivers) and choose one for ``max_error``; cached per (mesh, light, bounds, eps,
     max_error)."""
+    light = check_light(light)
     box = check_bounds("receiver_bounds", receiver_bounds)
     eps = non_negative_float("eps", eps)
     max_error = non_negative_float("max_error", max_error)

@@ -49,6 +49,13 @@ BIG_BOX = 4096
 BANDS = 64
 """Work-items sharing a big triangle, each drawing every BANDS-th row of its box."""
 
+STENCIL_MIN_GROUPS = 64
+"""The stencil's big triangles (a volume's long thin side quads, thousands of them) get one work-group
+(_BAND_GROUP bands) each, and more only while the launch has fewer than this many groups (balance over
+cores that other jobs share). With BANDS per triangle the bunny's 16 k side quads at 960 x 540 ran 1 M
+work-items, and their setup cost ~35 % of the stencil's fill (bench/stencil_profile.py); the camera
+and light passes keep BANDS: their few big triangles vary widely in size and need the finer split."""
+
 MAX_SIDE = GUARD_BAND
 """Largest width or height: the image must lie inside the guard band."""
 
@@ -222,7 +229,8 @@ def stencil(device: Device, volumes: Mesh, view: View, zbuffer: ZBuffer, zfail: 
     setup = _setup(device, volumes, view)
     stencil_dev = _image(device, view, np.int32(initial).view(np.uint32), "stencil buffer")
     launch = device.kernel(_FILE, "raster_stencil", _OPTIONS + (f"-DSTENCIL_ZFAIL={int(bool(zfail))}",))
-    _draw(device, launch, setup, view, depth_dev, stencil_dev)
+    groups = min(-(-STENCIL_MIN_GROUPS // max(setup.big_count, 1)), BANDS // _BAND_GROUP)   # per big triangle
+    _draw(device, launch, setup, view, depth_dev, stencil_dev, bands=groups * _BAND_GROUP)
     return device.from_device(stencil_dev, (view.height, view.width), np.int32)
 
 
@@ -351,12 +359,13 @@ def _depth_pass(device: Device, setup: _Setup, view: View) -> DepthMap:
     return DepthMap(buffer, view, device)
 
 
-def _draw(device: Device, kernel, setup: _Setup, view: View, *images: cl.Buffer) -> None:
+def _draw(device: Device, kernel, setup: _Setup, view: View, *images: cl.Buffer, bands: int = BANDS) -> None:
     """Run raster pass ``kernel`` (a name built with the common options, or a built kernel) into
-    ``images``: every triangle by one work-item, except big ones, shared by BANDS work-items so that
-    they spread over the compute units."""
+    ``images``: every triangle by one work-item, except big ones, shared by ``bands`` work-items (a
+    multiple of _BAND_GROUP) so that they spread over the compute units. Which work-item draws a row
+    changes nothing drawn: the passes' atomics commute."""
     launch = device.kernel(_FILE, kernel, _OPTIONS) if isinstance(kernel, str) else kernel
-    for n, bands, local in ((setup.triangles, 1, (_GROUP, 1)), (setup.big_count, BANDS, (1, _BAND_GROUP))):
+    for n, bands, local in ((setup.triangles, 1, (_GROUP, 1)), (setup.big_count, bands, (1, _BAND_GROUP))):
         if n:
             launch(
                 device.queue, (_rounded(n, local[0]), bands), local,
