@@ -3,14 +3,15 @@
     python bench/angular.py [--quick] [--out bench/results]
 
 1. Speed against error (the paper's figures 6-7): on bunny, teapot, ogre (scenes/models) and the hard
-   scenes, the angular method at 100, 300 and 600 rows and at the receivers' own limit (eq. 4, the
-   default), side by side with exact (the ground truth) and shadow_map in the same run; the median of
+   scenes, the angular method with both tables (``table="faces"``: a span per lit face and row;
+   ``"loops"``: the paper's ridge-edge loop pairs) at 100, 300 and 600 rows and at the receivers' own
+   limit (eq. 4, the default), side by side with exact (the ground truth) and shadow_map in the same run; the median of
    repeats after a warm-up, prepare + classify. Time ratio at equal error: against the cheapest
    shadow_map setting at least as accurate.
-2. Render: the camera's view at its own limit (rows per scan line, the default), error against exact,
+2. Render (both tables): the camera's view at its own limit (rows per scan line, the default), error against exact,
    and the scan-line runs (one lookup per run) against one lookup per pixel: lookups and time.
-3. Scalability (section 9): N cubes in a fixed volume over a plane, N up to 1e5, 600 rows: table build
-   time, lookup time for fixed receivers, table bytes against N, and the fitted exponent.
+3. Scalability (section 9), both tables: N cubes in a fixed volume over a plane, N up to 1e5, 600 rows:
+   table build time, lookup time for fixed receivers, table bytes against N, and the fitted exponent.
 4. Lookups per second against the paper's ~10 us per lookup.
 5. Several lights (section 11.1): shadow_counts with one light against two.
 
@@ -43,6 +44,7 @@ RESULTS = Path(__file__).resolve().parent / "results"
 MODELS = ["bunny", "teapot", "ogre"]
 HARD = sorted((PROJECT / "scenes" / "hard").glob("*.toml"))
 ROWS = [100, 300, 600, None]
+TABLES = ["faces", "loops"]
 SHADOW_MAP = [512, 1024, 2048, 4096]
 FULL = dict(ground=400_000, model=100_000, repeats=3, cubes=[1, 10, 100, 1000, 10_000, 100_000],
             render=(960, 540), scale_receivers=500_000)
@@ -85,7 +87,8 @@ def speed_error(cfg, device, quick: bool) -> list[dict]:
         rows.append(dict(scene=scene.name, method="exact", params="", prepare_s=p, classify_s=c, error=0.0,
                          receivers=len(points), triangles=len(scene.mesh.faces)))
         settings = [("shadow_map", {"resolution": r}) for r in SHADOW_MAP] + \
-                   [("angular", {"theta_resolution": r, "expected_receivers": len(points)}) for r in ROWS]
+                   [("angular", {"theta_resolution": r, "expected_receivers": len(points), "table": t})
+                    for t in TABLES for r in ROWS]
         for method, params in settings:
             p, c, mask, stats = timed(method, params, scene.mesh, light, points, normals, eps, cfg["repeats"], device)
             err = mask_error(mask, truth)
@@ -94,7 +97,8 @@ def speed_error(cfg, device, quick: bool) -> list[dict]:
                        receivers=len(points), triangles=len(scene.mesh.faces))
             if method == "angular":
                 row.update(rows=stats.get("rows"), entries=stats.get("entries"), table_bytes=stats.get("table_bytes"),
-                           table_faces=stats.get("table_faces"), full_circle=stats.get("full_circle"))
+                           table_faces=stats.get("table_faces"), full_circle=stats.get("full_circle"),
+                           table=params["table"], pairs=stats.get("pairs"))
             rows.append(row)
             print(f"{scene.name:20s} {method:10s} {row['params']:28s} {p + c:8.4f} s  error {err.fraction:.5f}")
     for row in rows:                                   # time ratio at equal error
@@ -126,37 +130,43 @@ def render_runs(cfg, device, quick: bool) -> list[dict]:
             print(f"skip {name}: {error}")
             continue
         exact = render_report(scene, "exact", width, height, device=device)
-        runs_report = render_report(scene, "angular", width, height, device=device)
-        pixel_report = render_report(scene, "angular", width, height, device=device, runs=False)
-        err = mask_error(runs_report.shadow.ravel(), exact.shadow.ravel())
-        # the table as render builds it (rows at the image's limit, pole on the camera's right axis), then the
-        # two lookups timed on it: scan-line runs against one lookup per pixel (median after a warm-up)
-        seen, view = runs_report.receivers, camera_view(scene, width, height)
-        method = create_method("angular", device, expected_receivers=len(seen.points))
-        method.prepare(scene.mesh, scene.lights[0], scene.bounds, default_eps(scene.bounds))
-        method.classify_view(view, None, seen)
-        line = seen.pixel_index // width
-        times = {True: [], False: []}
-        for _ in range(cfg["repeats"] + 1):
-            for runs in (True, False):
-                start = time.perf_counter()
-                if runs:
-                    method.classify_lines(seen.points, seen.normals, line, height)
-                    lookups = method.stats["lookups"]
-                else:
-                    method.classify(seen.points, seen.normals)
-                times[runs].append(time.perf_counter() - start)
-        t_runs, t_pixels = (statistics.median(times[r][1:]) for r in (True, False))
-        row = dict(scene=Path(str(name)).stem, size=f"{width}x{height}",
-                   pixels=len(seen.points), rows=method.stats["rows"], error=err.fraction,
-                   identical=bool(np.array_equal(runs_report.shadow, pixel_report.shadow)),
-                   lookups=lookups, lookups_per_pixel=lookups / max(len(seen.points), 1),
-                   classify_runs_s=t_runs, classify_per_pixel_s=t_pixels, exact_classify_s=exact.timings["classify"],
-                   prepare_s=runs_report.timings["prepare"], exact_prepare_s=exact.timings["prepare"])
-        out.append(row)
-        print(f"render {row['scene']:20s} rows {row['rows']:5d} error {err.fraction:.5f} lookups/pixel "
-              f"{row['lookups_per_pixel']:.3f} runs {t_runs:.4f} s per-pixel {t_pixels:.4f} s")
+        for table in TABLES:
+            out.append(_render_row(cfg, device, scene, name, exact, table))
     return out
+
+
+def _render_row(cfg, device, scene, name, exact, table: str) -> dict:
+    width, height = cfg["render"]
+    runs_report = render_report(scene, "angular", width, height, device=device, table=table)
+    pixel_report = render_report(scene, "angular", width, height, device=device, runs=False, table=table)
+    err = mask_error(runs_report.shadow.ravel(), exact.shadow.ravel())
+    # the table as render builds it (rows at the image's limit, pole on the camera's right axis), then the
+    # two lookups timed on it: scan-line runs against one lookup per pixel (median after a warm-up)
+    seen, view = runs_report.receivers, camera_view(scene, width, height)
+    method = create_method("angular", device, expected_receivers=len(seen.points), table=table)
+    method.prepare(scene.mesh, scene.lights[0], scene.bounds, default_eps(scene.bounds))
+    method.classify_view(view, None, seen)
+    line = seen.pixel_index // width
+    times = {True: [], False: []}
+    for _ in range(cfg["repeats"] + 1):
+        for runs in (True, False):
+            start = time.perf_counter()
+            if runs:
+                method.classify_lines(seen.points, seen.normals, line, height)
+                lookups = method.stats["lookups"]
+            else:
+                method.classify(seen.points, seen.normals)
+            times[runs].append(time.perf_counter() - start)
+    t_runs, t_pixels = (statistics.median(times[r][1:]) for r in (True, False))
+    row = dict(scene=Path(str(name)).stem, table=table, size=f"{width}x{height}",
+               pixels=len(seen.points), rows=method.stats["rows"], error=err.fraction,
+               identical=bool(np.array_equal(runs_report.shadow, pixel_report.shadow)),
+               lookups=lookups, lookups_per_pixel=lookups / max(len(seen.points), 1),
+               classify_runs_s=t_runs, classify_per_pixel_s=t_pixels, exact_classify_s=exact.timings["classify"],
+               prepare_s=runs_report.timings["prepare"], exact_prepare_s=exact.timings["prepare"])
+    print(f"render {row['scene']:20s} {table} rows {row['rows']:5d} error {err.fraction:.5f} lookups/pixel "
+          f"{row['lookups_per_pixel']:.3f} runs {t_runs:.4f} s per-pixel {t_pixels:.4f} s")
+    return row
 
 
 def several_lights(cfg, device) -> dict:
@@ -206,21 +216,24 @@ def scalability(cfg, device) -> dict:
     for n in cfg["cubes"]:
         mesh = cubes_scene(n, rng)
         eps = default_eps(mesh.bounds)
-        p, c, mask, stats = timed("angular", {"theta_resolution": 600}, mesh, light, points, normals, eps,
-                                  cfg["repeats"], device)
         pe, ce, truth, _ = timed("exact", {}, mesh, light, points, normals, eps, cfg["repeats"], device)
-        row = dict(cubes=n, triangles=len(mesh.faces), build_s=p, lookup_s=c, table_bytes=stats["table_bytes"],
-                   entries=stats["entries"], max_row=stats["max_row"], error=mask_error(mask, truth).fraction,
-                   exact_prepare_s=pe, exact_classify_s=ce, us_per_lookup=1e6 * c / m)
-        rows.append(row)
-        print(f"cubes {n:7d} build {p:.4f} s lookup {c:.4f} s table {stats['table_bytes'] >> 10} KiB "
-              f"error {row['error']:.5f} exact {pe + ce:.4f} s")
+        for table in TABLES:
+            p, c, mask, stats = timed("angular", {"theta_resolution": 600, "table": table}, mesh, light, points,
+                                      normals, eps, cfg["repeats"], device)
+            row = dict(cubes=n, table=table, triangles=len(mesh.faces), build_s=p, lookup_s=c,
+                       table_bytes=stats["table_bytes"], entries=stats["entries"], max_row=stats["max_row"],
+                       error=mask_error(mask, truth).fraction, exact_prepare_s=pe, exact_classify_s=ce,
+                       us_per_lookup=1e6 * c / m)
+            rows.append(row)
+            print(f"cubes {n:7d} {table} build {p:.4f} s lookup {c:.4f} s table {stats['table_bytes'] >> 10} KiB "
+                  f"error {row['error']:.5f} exact {pe + ce:.4f} s")
     fit = {}
-    big = [r for r in rows if r["cubes"] >= 100]
-    if len(big) >= 2:
-        x = np.log([r["cubes"] for r in big])
-        for key in ("build_s", "lookup_s", "table_bytes"):
-            fit[key] = float(np.polyfit(x, np.log([r[key] for r in big]), 1)[0])
+    for table in TABLES:
+        big = [r for r in rows if r["cubes"] >= 100 and r["table"] == table]
+        if len(big) >= 2:
+            x = np.log([r["cubes"] for r in big])
+            fit[table] = {key: float(np.polyfit(x, np.log([r[key] for r in big]), 1)[0])
+                          for key in ("build_s", "lookup_s", "table_bytes")}
     return dict(receivers=m, rows=600, points=rows, exponent_from_100_cubes=fit)
 
 
@@ -242,10 +255,11 @@ def markdown(doc: dict) -> str:
         lines.append(f"| {r['scene']} | {r['method']} | {r['params']} | {extra[0]} | {r['prepare_s']:.4f} | "
                      f"{r['classify_s']:.4f} | {r['error']:.5f} | {extra[1]} | {extra[2]} |")
     lines += ["", "## Render: the image's own limit (rows from the scan lines), runs against per-pixel lookups", "",
-              "| scene | size | covered pixels | rows | error vs exact | runs = per-pixel | lookups / pixel | "
-              "classify runs s | classify per-pixel s | exact classify s |", "|---|---|---|---|---|---|---|---|---|---|"]
+              "| scene | table | size | covered pixels | rows | error vs exact | runs = per-pixel | lookups / pixel | "
+              "classify runs s | classify per-pixel s | exact classify s |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in doc["render"]:
-        lines.append(f"| {r['scene']} | {r['size']} | {r['pixels']} | {r['rows']} | {r['error']:.5f} | {r['identical']} | "
+        lines.append(f"| {r['scene']} | {r['table']} | {r['size']} | {r['pixels']} | {r['rows']} | {r['error']:.5f} | "
+                     f"{r['identical']} | "
                      f"{r['lookups_per_pixel']:.3f} | {r['classify_runs_s']:.4f} | {r['classify_per_pixel_s']:.4f} | "
                      f"{r['exact_classify_s']:.4f} |")
     s = doc["scalability"]
@@ -256,14 +270,15 @@ def markdown(doc: dict) -> str:
               f"{m['two']['wrong']:.5f} (two)."]
     lines += ["", f"## Scalability (section 9): N cubes in a fixed volume over a plane, {s['rows']} rows, "
               f"{s['receivers']} ground receivers", "",
-              "| cubes | triangles | build s | lookup s | us / lookup | table KiB | records | longest row | error | "
-              "exact prepare s | exact classify s |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+              "| cubes | table | triangles | build s | lookup s | us / lookup | table KiB | records | longest row | error | "
+              "exact prepare s | exact classify s |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in s["points"]:
-        lines.append(f"| {r['cubes']} | {r['triangles']} | {r['build_s']:.4f} | {r['lookup_s']:.4f} | "
+        lines.append(f"| {r['cubes']} | {r['table']} | {r['triangles']} | {r['build_s']:.4f} | {r['lookup_s']:.4f} | "
                      f"{r['us_per_lookup']:.3f} | {r['table_bytes'] / 1024:.0f} | {r['entries']} | {r['max_row']} | "
                      f"{r['error']:.5f} | {r['exact_prepare_s']:.4f} | {r['exact_classify_s']:.4f} |")
-    lines += ["", "Fitted exponents (log-log slope from 100 cubes up): " +
-              ", ".join(f"{k} {v:.2f}" for k, v in s["exponent_from_100_cubes"].items()), ""]
+    lines += ["", "Fitted exponents (log-log slope from 100 cubes up): " + "; ".join(
+        f"{t}: " + ", ".join(f"{k} {v:.2f}" for k, v in fit.items()) for t, fit in s["exponent_from_100_cubes"].items()),
+        ""]
     lines += ["## Closing note", ""] + closing_note(doc) + [""]
     return "\n".join(lines)
 
@@ -271,19 +286,21 @@ def markdown(doc: dict) -> str:
 def closing_note(doc: dict) -> list[str]:
     """The issue's bars, computed from the rows above."""
     rows = doc["speed_error"]
-    default = [r for r in rows if r["method"] == "angular" and r["params"] == "theta_resolution=None"]
+    default = [r for r in rows if r["method"] == "angular" and r["params"] == "theta_resolution=None, table=faces"]
     models = [r for r in default if r["scene"] in MODELS]
     falls = []
     for scene in sorted({r["scene"] for r in rows}):
-        errors = [r["error"] for r in rows if r["scene"] == scene and r["method"] == "angular" and r["rows"] in (100, 300, 600)]
+        errors = [r["error"] for r in rows if r["scene"] == scene and r["method"] == "angular"
+                  and r["table"] == "faces" and r["rows"] in (100, 300, 600)]
         falls.append(all(a >= b for a, b in zip(errors, errors[1:])))
-    beats_sm = sorted({r["scene"] for r in rows if r.get("vs_shadow_map", 9) < 1})
+    beats_sm = sorted({r["scene"] for r in rows if r.get("vs_shadow_map", 9) < 1 and r.get("table") == "faces"})
     beats_ex = sorted({r["scene"] for r in default if r["vs_exact"] < 1})
-    fit = doc["scalability"]["exponent_from_100_cubes"]
-    return [
+    fit = doc["scalability"]["exponent_from_100_cubes"].get("faces", {})
+    return table_note(doc) + [
         "- Default rows (eq. 4) on the models: " + ", ".join(f"{r['scene']} {100 * r['error']:.3f} %" for r in models)
         + " of receivers differ from exact (bar: at most 1 %); render at the image's limit: "
-        + ", ".join(f"{r['scene']} {100 * r['error']:.3f} %" for r in doc["render"] if r["scene"] in MODELS) + ".",
+        + ", ".join(f"{r['scene']} {100 * r['error']:.3f} %" for r in doc["render"]
+                    if r["scene"] in MODELS and r["table"] == "faces") + " (faces table, the default).",
         f"- Error falls from 100 to 300 to 600 rows on {sum(falls)} of {len(falls)} scenes.",
         f"- Faster than the cheapest shadow map at least as accurate (some setting): {', '.join(beats_sm) or 'none'}; "
         f"faster than exact at the default rows: {', '.join(beats_ex) or 'none'} (timings noisy, shared cores).",
@@ -295,6 +312,23 @@ def closing_note(doc: dict) -> list[str]:
     ]
 
 
+def table_note(doc: dict) -> list[str]:
+    """The two tables side by side at equal rows: summed error and time over the scenes, per rows setting."""
+    rows = [r for r in doc["speed_error"] if r["method"] == "angular"]
+    out = []
+    for setting in ROWS:
+        cells = {}
+        for table in TABLES:
+            sel = [r for r in rows if r["table"] == table and r["params"].startswith(f"theta_resolution={setting},")]
+            cells[table] = (sum(r["error"] for r in sel) / max(len(sel), 1), sum(r["prepare_s"] + r["classify_s"] for r in sel),
+                            sum(r["error"] > s["error"] + 1e-12 for r in sel for s in rows if s["scene"] == r["scene"]
+                                and s["table"] != table and s["params"].split(",")[0] == r["params"].split(",")[0]))
+        f, lo = cells["faces"], cells["loops"]
+        out.append(f"- Tables at theta_resolution={setting}: mean error faces {f[0]:.5f} / loops {lo[0]:.5f}; total time "
+                   f"faces {f[1]:.3f} s / loops {lo[1]:.3f} s; scenes where it is the worse: faces {f[2]}, loops {lo[2]}.")
+    return out
+
+
 def plot(doc: dict, path: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
@@ -304,18 +338,21 @@ def plot(doc: dict, path: Path) -> None:
     scenes = sorted({r["scene"] for r in doc["speed_error"]})
     for i, scene in enumerate(scenes):
         color = plt.cm.tab20(i % 20)
-        for method, marker in (("angular", "o"), ("shadow_map", "s")):
-            rs = [r for r in doc["speed_error"] if r["scene"] == scene and r["method"] == method]
+        for method, table, marker, ls in (("angular", "faces", "o", "-"), ("angular", "loops", "^", "--"),
+                                          ("shadow_map", None, "s", ":")):
+            rs = [r for r in doc["speed_error"] if r["scene"] == scene and r["method"] == method
+                  and r.get("table") == table]
             a.plot([r["prepare_s"] + r["classify_s"] for r in rs], [max(r["error"], 1e-6) for r in rs],
-                   marker=marker, color=color, ls="-" if method == "angular" else ":", label=scene if method == "angular" else None)
+                   marker=marker, color=color, ls=ls, label=scene if table == "faces" else None)
     a.set(xscale="log", yscale="log", xlabel="prepare + classify (s)", ylabel="error (share of receivers)",
-          title="angular (o, solid) and shadow_map (s, dotted)")
+          title="angular faces (o, solid), loops (^, dashed), shadow_map (s, dotted)")
     a.legend(fontsize=6)
-    pts = doc["scalability"]["points"]
-    n = [p["cubes"] for p in pts]
-    for key, label in (("build_s", "build s"), ("lookup_s", "lookup s")):
-        b.plot(n, [p[key] for p in pts], "o-", label=label)
-    b.plot(n, [p["table_bytes"] / 1e9 for p in pts], "s--", label="table GB")
+    for table, ls in (("faces", "-"), ("loops", "--")):
+        pts = [p for p in doc["scalability"]["points"] if p["table"] == table]
+        n = [p["cubes"] for p in pts]
+        for key, label, marker in (("build_s", "build s", "o"), ("lookup_s", "lookup s", "^")):
+            b.plot(n, [p[key] for p in pts], marker=marker, ls=ls, label=f"{table} {label}")
+        b.plot(n, [p["table_bytes"] / 1e9 for p in pts], marker="s", ls=ls, label=f"{table} table GB")
     b.set(xscale="log", yscale="log", xlabel="cubes", title="scalability (section 9)")
     b.legend()
     fig.tight_layout()
@@ -337,7 +374,7 @@ def main(argv=None) -> None:
     doc["render"] = render_runs(cfg, device, args.quick)
     doc["several_lights"] = several_lights(cfg, device)
     doc["scalability"] = scalability(cfg, device)
-    big = doc["scalability"]["points"][-1]
+    big = [p for p in doc["scalability"]["points"] if p["table"] == "faces"][-1]
     doc["lookup_rate"] = dict(receivers_per_s=cfg["scale_receivers"] / big["lookup_s"], us_per_lookup=big["us_per_lookup"],
                               paper_us_per_lookup=10.0, cubes=big["cubes"])
     stem = args.stem or ("angular-quick" if args.quick else "angular")

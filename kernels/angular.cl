@@ -13,6 +13,10 @@
  * side), used for the depth test: exact depth instead of interpolating r between the pair's ends;
  * then the face index (int bits) and the running maximum of s_hi along the row (set by sort_rows).
  * An empty span (the row's centre grazes the face) is s_lo = 2 > s_hi = -2 and never matches.
+ * The paper's table (host table="loops") puts loop pairs in the same record layout: s_lo, s_hi of a pair
+ * of ridge-edge crossings (edge_rows, fill_edges, pair_rows below), the plane of the chord between them
+ * (depth interpolated between the pair's ends), -(region + 1) in place of the face; the lookups are
+ * the same kernels.
  *
  * Build options:
  *   LIGHT_POINT   1 point light at the origin, 0 directional light from +Z
@@ -261,14 +265,24 @@ INLINE void swap_records(__global float *rec, int a, int b)
     vstore8(t, b, rec);
 }
 
-/* sort_rows: one work-item per row; heapsort of the row's records by s_lo (in place, O(n log n)), then
- * the running maximum of s_hi into each record's last float. */
-__kernel void sort_rows(const __global int *offsets, const int rows, __global float *records)
+/* Record a before record b: by s_lo, or (by_loop, crossings) by region (int bits in [5]), kind ([7]: ridge
+ * crossings before crease duplicates), s, edge. */
+INLINE bool record_before(const __global float *rec, int a, int b, bool by_loop)
 {
-    const int k = get_global_id(0);
-    if (k >= rows) return;
-    __global float *rec = records + (size_t)REC * offsets[k];
-    const int n = offsets[k + 1] - offsets[k];
+    const __global float *ra = rec + REC * a, *rb = rec + REC * b;
+    if (by_loop) {
+        const int la = as_int(ra[5]), lb = as_int(rb[5]);
+        if (la != lb) return la < lb;
+        if (ra[7] != rb[7]) return ra[7] < rb[7];
+        if (ra[0] != rb[0]) return ra[0] < rb[0];
+        return as_int(ra[6]) < as_int(rb[6]);
+    }
+    return ra[0] < rb[0];
+}
+
+/* In-place heapsort of n records (O(n log n), no scratch). */
+INLINE void heapsort_records(__global float *rec, int n, bool by_loop)
+{
     for (int start = n / 2 - 1, end = n; end > 1;) {
         int root;
         if (start >= 0) {
@@ -278,18 +292,248 @@ __kernel void sort_rows(const __global int *offsets, const int rows, __global fl
             root = 0;
         }
         for (int child = 2 * root + 1; child < end; child = 2 * root + 1) {
-            if (child + 1 < end && rec[REC * (child + 1)] > rec[REC * child]) ++child;
-            if (rec[REC * root] >= rec[REC * child]) break;
+            if (child + 1 < end && record_before(rec, child, child + 1, by_loop)) ++child;
+            if (!record_before(rec, root, child, by_loop)) break;
             swap_records(rec, root, child);
             root = child;
         }
     }
+}
+
+/* sort_rows: one work-item per row; heapsort of the row's records by s_lo, then the running maximum of
+ * s_hi into each record's last float. */
+__kernel void sort_rows(const __global int *offsets, const int rows, __global float *records)
+{
+    const int k = get_global_id(0);
+    if (k >= rows) return;
+    __global float *rec = records + (size_t)REC * offsets[k];
+    const int n = offsets[k + 1] - offsets[k];
+    heapsort_records(rec, n, false);
     /* r[7]: running maximum of s_hi along the row, so a lookup can stop scanning backwards */
     float run = -2.0f;
     for (int j = 0; j < n; ++j) {
         run = SC_MAX(run, rec[REC * j + 1]);
         rec[REC * j + 7] = run;
     }
+}
+
+/* ---- The paper's loop table (table="loops") ----------------------------------------------------------
+ * An edge tail -> head crosses row k when the row's centre lies in the edge's row-coordinate range
+ * (unwrapped the short way round for a point light). Edges [0, nridge) are ridge edges (loop order), the
+ * rest concave creases between two lit faces, inserted in duplicate for depth (section 5). Crossing
+ * record, 8 floats: s, x, y, z (the crossing point in the frame: its r = |(x, y, z)|), up (+1 towards
+ * larger theta, -1 smaller), lit region (int bits: the pairing group), edge id (int bits), kind (0 ridge,
+ * 1 crease duplicate). */
+
+/* edge_rows: one work-item per ridge edge: first row (unwrapped) and number of rows it crosses. */
+__kernel void edge_rows(const __global float *vertices, const __global int *tails, const __global int *heads,
+                        const int nedges, const float t0, const float dt, const int rows,
+                        __global int *first_row, __global int *row_count)
+{
+    const int i = get_global_id(0);
+    if (i >= nedges) return;
+    float x0, y0, z0, x1, y1, z1;
+    LOAD3(vertices, tails[i], x0, y0, z0);
+    LOAD3(vertices, heads[i], x1, y1, z1);
+    const float ta = row_coordinate(y0, z0);
+    float db = row_coordinate(y1, z1) - ta;
+#if LIGHT_POINT
+    db += db > PI_F ? -2.0f * PI_F : (db < -PI_F ? 2.0f * PI_F : 0.0f);
+#endif
+    const float tmin = ta + SC_MIN(0.0f, db), tmax = ta + SC_MAX(0.0f, db);
+    int k0 = (int)ceil((tmin - t0) / dt - 0.5f);
+    int k1 = (int)SC_FLOOR((tmax - t0) / dt - 0.5f);
+#if !FULL_CIRCLE
+    k0 = max(k0, 0);
+    k1 = min(k1, rows - 1);
+#endif
+    first_row[i] = k0;
+    row_count[i] = max(min(k1 - k0 + 1, rows), 0);
+}
+
+/* fill_edges: one work-item per ridge edge; its crossing record in every row it crosses, at the row's
+ * offset plus a slot from the row's cursor. */
+__kernel void fill_edges(const __global float *vertices, const __global int *tails, const __global int *heads,
+                         const __global int *group, const int nedges, const int nridge, const float t0, const float dt,
+                         const int rows,
+                         const __global int *first_row, const __global int *row_count,
+                         const __global int *offsets, volatile __global int *cursor, __global float *crossings)
+{
+    const int i = get_global_id(0);
+    if (i >= nedges) return;
+    const int n = row_count[i];
+    float x0, y0, z0, x1, y1, z1;
+    LOAD3(vertices, tails[i], x0, y0, z0);
+    LOAD3(vertices, heads[i], x1, y1, z1);
+    for (int j = 0; j < n; ++j) {
+        const int k = wrap_row(first_row[i] + j, rows);
+        const float tk = t0 + ((float)k + 0.5f) * dt;
+#if LIGHT_POINT
+        const float my = cos(tk), mz = sin(tk);
+        const float a = my * y0 + mz * z0, b = my * y1 + mz * z1;
+        const float up = a < b ? 1.0f : -1.0f;   /* moving towards the plane's positive side: larger theta */
+#else
+        const float a = y0 - tk, b = y1 - tk;
+        const float up = a < b ? 1.0f : -1.0f;
+#endif
+        const float t = a != b ? SC_MIN(SC_MAX(a / (a - b), 0.0f), 1.0f) : 0.5f;
+        const float cx = x0 + t * (x1 - x0), cy = y0 + t * (y1 - y0), cz = z0 + t * (z1 - z0);
+#if LIGHT_POINT
+        const float r = SC_SQRT(cx * cx + cy * cy + cz * cz);
+        const float s = r > 0.0f ? cx / r : 0.0f;
+#else
+        const float s = cx;
+#endif
+        __global float *c = crossings + (size_t)REC * (offsets[k] + atomic_inc(&cursor[k]));
+        c[0] = s; c[1] = cx; c[2] = cy; c[3] = cz; c[4] = up;
+        c[5] = as_float(group[i]);
+        c[6] = as_float(i);
+        c[7] = i < nridge ? 0.0f : 1.0f;
+    }
+}
+
+/* Unit direction of crossing c's ridge edge, turned towards larger theta. */
+INLINE void edge_direction(const __global float *vertices, const __global int *tails, const __global int *heads,
+                           const __global float *c, float *ux, float *uy, float *uz)
+{
+    const int e = as_int(c[6]);
+    if (e < 0) {                       /* a pole crossing: no edge */
+        *ux = *uy = *uz = 0.0f;
+        return;
+    }
+    float x0, y0, z0, x1, y1, z1;
+    LOAD3(vertices, tails[e], x0, y0, z0);
+    LOAD3(vertices, heads[e], x1, y1, z1);
+    const float sign = c[4] / SC_MAX(SC_SQRT((x1 - x0) * (x1 - x0) + (y1 - y0) * (y1 - y0) + (z1 - z0) * (z1 - z0)),
+                                     1e-30f);
+    *ux = sign * (x1 - x0); *uy = sign * (y1 - y0); *uz = sign * (z1 - z0);
+}
+
+/* fill_poles: one work-item per row; the pole crossings (x = poles[j], the pole axis piercing a lit face
+ * of region pole_regions[j]) at the row's first slots. s = sign(x); up as a ridge crossing there would go:
+ * lit faces turn counter-clockwise to the light and (X, m) is counter-clockwise seen from it, so a region
+ * lies at larger s where its boundary goes down (-1: the -X pole opens a span) and the +X pole closes one. */
+__kernel void fill_poles(const __global float *poles, const __global int *pole_regions, const int npoles,
+                         const int rows, const __global int *offsets, __global float *crossings)
+{
+    const int k = get_global_id(0);
+    if (k >= rows) return;
+    for (int j = 0; j < npoles; ++j) {
+        __global float *c = crossings + (size_t)REC * (offsets[k] + j);
+        const float x = poles[j];
+        c[0] = x > 0.0f ? 1.0f : -1.0f;
+        c[1] = x; c[2] = 0.0f; c[3] = 0.0f;
+        c[4] = x > 0.0f ? 1.0f : -1.0f;
+        c[5] = as_float(pole_regions[j]);
+        c[6] = as_float(-1);
+        c[7] = 0.0f;
+    }
+}
+
+/* The pair record of crossings A (entering) and B (leaving) of one loop in row tk: s_lo, s_hi, then a
+ * plane through A and B, oriented with the light on its positive side, then -(loop + 1) (int bits) and 0.
+ * In the row's centre plane the ray to a receiver meets it on the chord AB: the depth interpolated between
+ * the pair's ends (section 5's "simple trigonometry"). Off the centre plane (a receiver's theta is up to
+ * half a row away) it extends along the mean of the two ridge edges' directions, so a cap bounded by its
+ * loop (a planar face, a terminator's plane) keeps its own depth; along the row plane's normal instead,
+ * receivers on the occluder's own lit cap fell on the wrong side of it (half of them, cube over plane). */
+INLINE void write_pair(__global float *out, const __global float *ca, const __global float *cb, float tk,
+                       const __global float *vertices, const __global int *tails, const __global int *heads)
+{
+    float ax, ay, az, bx, by, bz;
+    edge_direction(vertices, tails, heads, ca, &ax, &ay, &az);
+    edge_direction(vertices, tails, heads, cb, &bx, &by, &bz);
+    const float ex = cb[1] - ca[1], ey = cb[2] - ca[2], ez = cb[3] - ca[3];
+    float mx = ax + bx, my = ay + by, mz = az + bz;
+    {   /* fall back to the row plane's normal when the mean direction is (nearly) along the chord */
+        const float cx = ey * mz - ez * my, cy = ez * mx - ex * mz, cz = ex * my - ey * mx;
+        const float e2 = ex * ex + ey * ey + ez * ez, m2 = mx * mx + my * my + mz * mz;
+        if (cx * cx + cy * cy + cz * cz <= 1e-6f * e2 * m2) {
+#if LIGHT_POINT
+            mx = 0.0f; my = cos(tk); mz = sin(tk);
+#else
+            mx = 0.0f; my = 1.0f; mz = 0.0f;
+#endif
+        }
+    }
+    float nx = ey * mz - ez * my, ny = ez * mx - ex * mz, nz = ex * my - ey * mx;
+    float d = dot3(nx, ny, nz, ca[1], ca[2], ca[3]);
+#if LIGHT_POINT
+    const float side = -d;
+#else
+    const float side = nz;
+#endif
+    const float flip = side < 0.0f ? -1.0f : (side > 0.0f ? 1.0f : 0.0f);   /* 0: degenerate, never blocks */
+    out[0] = SC_MIN(ca[0], cb[0]);
+    out[1] = SC_MAX(ca[0], cb[0]);
+    out[2] = nx * flip; out[3] = ny * flip; out[4] = nz * flip; out[5] = d * flip;
+    out[6] = as_float(-(as_int(ca[5]) + 1));
+    out[7] = 0.0f;
+}
+
+/* pair_rows: one work-item per row. Sorts the row's crossings by (region, kind, s) and pairs each lit
+ * region's ridge crossings by section 4's rule: in s order, a crossing going the way the region's first
+ * one goes (or any while none waits) waits; one going the other way pairs with the oldest waiting (first
+ * in, first out), so the chains leaving a local theta peak bound one span and coils pair correctly; a
+ * region's outer loop and its holes pair together (a torus lit from above: its hole stays lit). Each pair
+ * is then cut at the region's crease duplicates inside it (section 5): A h1, h1 h2, ..., hn B.
+ * Output: pairs[cap * offsets[k] + p], p < npairs[k] <= cap * (crossings of row k); more sets overflow[0]
+ * (the host grows cap and reruns). queue: int scratch as long as the crossings. */
+__kernel void pair_rows(const __global int *offsets, const int rows, const float t0, const float dt,
+                        const __global float *vertices, const __global int *tails, const __global int *heads,
+                        const int cap, __global float *crossings, __global int *queue, __global float *pairs,
+                        __global int *npairs, volatile __global int *overflow)
+{
+    const int k = get_global_id(0);
+    if (k >= rows) return;
+    const int base = offsets[k], n = offsets[k + 1] - offsets[k], limit = cap * n;
+    __global float *c = crossings + (size_t)REC * base;
+    __global float *out = pairs + (size_t)REC * cap * base;
+    __global int *q = queue + base;
+    heapsort_records(c, n, true);
+    const float tk = t0 + ((float)k + 0.5f) * dt;
+    int p = 0;
+    for (int g = 0; g < n;) {
+        const int region = as_int(c[REC * g + 5]);
+        const float opener = c[REC * g + 4];
+        int head = 0, tail = 0, j = g;
+        for (; j < n && as_int(c[REC * j + 5]) == region && c[REC * j + 7] == 0.0f; ++j) {
+            if (c[REC * j + 4] == opener || head == tail) {
+                q[tail++] = j;
+                continue;
+            }
+            /* pair (q[head], j), cut at the region's duplicates inside it (they follow its ridge crossings) */
+            int from = q[head++];
+            const float lo = c[REC * from], hi = c[REC * j];
+            int d = j + 1;
+            while (d < n && as_int(c[REC * d + 5]) == region && c[REC * d + 7] == 0.0f) ++d;
+            for (; d < n && as_int(c[REC * d + 5]) == region; ++d) {
+                const float sd = c[REC * d];
+                if (sd <= lo || sd >= hi) continue;
+                if (p < limit) write_pair(out + REC * p, c + REC * from, c + REC * d, tk, vertices, tails, heads);
+                ++p;
+                from = d;
+            }
+            if (p < limit) write_pair(out + REC * p, c + REC * from, c + REC * j, tk, vertices, tails, heads);
+            ++p;
+        }
+        while (j < n && as_int(c[REC * j + 5]) == region) ++j;       /* skip the region's duplicates */
+        g = j;
+    }
+    if (p > limit) atomic_max(overflow, p - limit);
+    npairs[k] = min(p, limit);
+}
+
+/* copy_pairs: one work-item per row; its npairs[k] pair records (from cap * src_offsets[k]) to
+ * dst_offsets[k] (the merged table). */
+__kernel void copy_pairs(const __global int *src_offsets, const __global int *npairs, const __global int *dst_offsets,
+                         const int rows, const int cap, const __global float *pairs, __global float *records)
+{
+    const int k = get_global_id(0);
+    if (k >= rows) return;
+    const int n = npairs[k];
+    for (int j = 0; j < n; ++j)
+        vstore8(vload8(cap * src_offsets[k] + j, pairs), dst_offsets[k] + j, records);
 }
 
 /* The face of record r blocks the segment from p to the light, further than eps from p. */

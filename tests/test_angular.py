@@ -276,16 +276,17 @@ def test_runs_count_lookups(device, rng):
 
 # Masks against the exact method ------------------------------------------------------------------------------
 
-def test_cube_over_plane_error_bound(device, rng):
+@pytest.mark.parametrize("table", angular.TABLES)
+def test_cube_over_plane_error_bound(device, rng, table):
     """Ground receivers may differ from exact only if the exact answer changes within half a row (in theta)
-    of their direction: the spans come from the row's centre."""
+    of their direction: the spans come from the row's centre (both tables)."""
     mesh, cube = cube_over_plane(), _mesh(_box((1, 1, 1), (0, 1.5, 0)))
     light = sc.PointLight((0.3, 5, 0.2))
     pts = ground_points(rng, 20000)
     exact = sc.shadow_mask(mesh, light, pts, method="exact", eps=EPS)
     errors = []
     for rows in (60, 240):
-        method = prepared(device, mesh, light, pts, theta_resolution=rows)
+        method = prepared(device, mesh, light, pts, theta_resolution=rows, table=table)
         got = method.classify(pts)
         differ = np.flatnonzero(got != exact)
         errors.append(len(differ))
@@ -310,26 +311,29 @@ HARD = sorted((SCENES / "hard").glob("*.toml"))
 
 @pytest.mark.parametrize("path", HARD, ids=[p.stem for p in HARD])
 def test_hard_cases(device, path):
-    """Every hard scene: the error against exact at the default resolution (the image's own limit) stays
-    under 3 % of the covered pixels (the discretization band), and 360 rows are no worse than 90."""
+    """Every hard scene, both tables: the error against exact at the default resolution (the image's own
+    limit) stays under 3 % of the covered pixels (the discretization band), and 360 rows are no worse than 90."""
     scene = sc.Scene.load(path)
     exact = render_report(scene, "exact", width=160, height=90).shadow
-    wrong = {}
-    for rows in (None, 90, 360):
-        result = render_report(scene, "angular", width=160, height=90, theta_resolution=rows)
-        wrong[rows] = np.count_nonzero(result.shadow != exact)
-    # 3 %: the 256-segment sphere's terminator (2.3 %, a grazing self-shadow band half a row wide) is the worst
-    assert wrong[None] <= 0.03 * exact.size, wrong
-    assert wrong[360] <= wrong[90] + 0.002 * exact.size, wrong
+    for table in angular.TABLES:
+        wrong = {}
+        for rows in (None, 90, 360):
+            result = render_report(scene, "angular", width=160, height=90, theta_resolution=rows, table=table)
+            wrong[rows] = np.count_nonzero(result.shadow != exact)
+        # 3 %: the 256-segment sphere's terminator (faces: 2.3 %, a grazing self-shadow band half a row wide)
+        assert wrong[None] <= 0.03 * exact.size, (table, wrong)
+        assert wrong[360] <= wrong[90] + 0.002 * exact.size, (table, wrong)
 
 
-def test_coiled_pairing(device):
+@pytest.mark.parametrize("table", angular.TABLES)
+def test_coiled_pairing(device, table):
     """Figure 4: a coiled loop. The paper's pairing of the loop's crossings (reference) covers the doubly
-    wound sector that even-odd pairing would leave as a hole, and the device table's spans cover the same."""
+    wound sector that even-odd pairing would leave as a hole, and the device table's spans cover the same
+    (faces: the lit faces' spans; loops: the device's own section-4 pairs)."""
     mesh = coil()
     light = sc.DirectionalLight((0, -1, 0))
     pts = ground_points(np.random.default_rng(4), 4000, half=2.0, y=-0.5)
-    method = prepared(device, mesh, light, pts, theta_resolution=40)
+    method = prepared(device, mesh, light, pts, theta_resolution=40, table=table)
     loops = angular.ridge_loops(device, mesh, light)
     loop_local = method.frame.to_local(mesh.vertices[loops[0].vertices].astype(np.float64))
     got = method.entries()
@@ -370,7 +374,174 @@ def test_api(device):
 
 # Bad input -----------------------------------------------------------------------------------------------
 
+# The paper's table (table="loops") -------------------------------------------------------------------------
+
+def torus_over_plane(axis_up=True) -> sc.Mesh:
+    torus = trimesh.creation.torus(major_radius=1.0, minor_radius=0.3, major_sections=24, minor_sections=12)
+    if axis_up:
+        torus.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2, (1, 0, 0)))
+    torus.apply_translation((0, 1.5, 0))
+    return _mesh(torus, _box((8, 0.2, 8), (0, -0.1, 0)))
+
+
+def _tie_rows(method, local):
+    """Rows whose centre lies within ROW_TIE (row units) of a vertex's row coordinate: an edge ending there
+    may cross the row in float32 and not in float64 (or the other way)."""
+    f = method.frame
+    g = (ref.row_coordinate(local, f.point) - f.t0) / f.dt - 0.5
+    near = np.abs(g - np.round(g)) < ref.ROW_TIE
+    rows = np.round(g[near]).astype(np.int64)
+    return set((rows % f.rows if f.full_circle else rows).tolist())
+
+
+def _compare_loop_table(method):
+    """Device loop table against ref.loop_table on the same frame and loops: per row (ties aside) the same
+    number of pairs, in s_lo order, the same spans within S_TOL, the same grouping into regions (a
+    one-to-one map of the labels), and both reference ends on the device pair's depth plane."""
+    f = method.frame
+    local = local_vertices(method)
+    chains = [loop.vertices.tolist() for loop in method.loops.loops]
+    want = ref.loop_table(local, method.mesh.faces, chains, f.t0, f.dt, f.rows, f.full_circle, f.point)
+    got = method.entries()
+    ties = _tie_rows(method, local)
+    mapping, checked = {}, 0
+    for k in range(f.rows):
+        g = np.arange(got["offsets"][k], got["offsets"][k + 1])
+        assert np.all(np.diff(got["s_lo"][g]) >= 0), f"row {k} not sorted by s_lo"
+        if k in ties:
+            continue
+        w = np.flatnonzero(want["row"] == k)
+        assert len(g) == len(w), f"row {k}: {len(g)} pairs, reference {len(w)}"
+        assert np.all(got["region"][g] >= 0)
+        # match each device pair to an unused reference pair of the row with the same ends (s within S_TOL:
+        # float32 cuts of float32 corners, reference docstring) whose ends both lie on the device pair's depth
+        # plane (float32 plane from float32 points: ~1e-6 relative; 1e-4 leaves room for grazing cuts). A
+        # zero plane (chord along the light's rays) matches a zero-width reference pair. Degenerate rows (a
+        # coil's end wall edge-on to the light) hold equal spans with different planes: hence the matching.
+        free = set(w.tolist())
+        for i in g:
+            plane = got["plane"][i].astype(np.float64)
+            found = None
+            for j in sorted(free):
+                if abs(got["s_lo"][i] - want["s_lo"][j]) > ref.S_TOL or abs(got["s_hi"][i] - want["s_hi"][j]) > ref.S_TOL:
+                    continue
+                scale = np.linalg.norm(plane[:3]) * max(np.linalg.norm(want["a"][j]), 1.0)
+                if scale == 0:
+                    ok = want["s_hi"][j] - want["s_lo"][j] < ref.S_TOL
+                else:
+                    ok = all(abs(plane[:3] @ end - plane[3]) <= 1e-4 * scale for end in (want["a"][j], want["b"][j]))
+                if ok:
+                    found = j
+                    break
+            assert found is not None, f"row {k}: no reference pair for device pair {i}"
+            free.discard(found)
+            assert mapping.setdefault(int(got["region"][i]), int(want["region"][found])) == want["region"][found], \
+                f"row {k}: regions differ"
+        checked += len(w)
+    assert len(set(mapping.values())) == len(mapping)
+    assert checked > 0
+    return got, want
+
+
+@pytest.mark.parametrize("case", ["cube_point_7", "cube_point_64", "cube_directional", "torus_point", "torus_directional",
+                                  "coil", "light_inside"])
+def test_loop_table(device, case):
+    rng = np.random.default_rng(5)
+    if case.startswith("cube"):
+        mesh, rows = cube_over_plane(), int(case.split("_")[-1]) if case[-1].isdigit() else 50
+        light = sc.DirectionalLight((0.3, -1, 0.2)) if "directional" in case else sc.PointLight((0.3, 5, 0.2))
+        method = prepared(device, mesh, light, ground_points(rng, 100), theta_resolution=rows, table="loops")
+    elif case.startswith("torus"):
+        light = sc.DirectionalLight((0.2, -1, 0.1)) if "directional" in case else sc.PointLight((0.3, 5, 0.2))
+        method = prepared(device, torus_over_plane(), light, ground_points(rng, 100), theta_resolution=83,
+                          table="loops")
+    elif case == "coil":
+        # tilted: from straight above the two turns project onto each other and crossings tie in s (the
+        # pairing of equal keys is then a matter of sort order)
+        method = prepared(device, coil(), sc.DirectionalLight((0.07, -1, 0.04)),
+                          ground_points(rng, 100, half=2.0, y=-0.5), theta_resolution=40, table="loops")
+    else:
+        scene = sc.Scene.load(SCENES / "hard" / "light_inside.toml")
+        method = angular.AngularMethod(device, theta_resolution=90, table="loops")
+        method.prepare(scene.mesh, scene.lights[0], scene.bounds, EPS)
+        assert method.frame.full_circle and method.stats["poles"] > 0     # pillars round the pole axis
+    assert method.stats["table_faces"] == 0 and method.stats["pairs"] == method.table.entries
+    _compare_loop_table(method)
+    if case.startswith("torus") or case == "light_inside":
+        assert method.stats["creases"] > 0                 # section 5's duplicates are exercised
+    _compare_lookups_loops(method, rng)
+
+
+def _compare_lookups_loops(method, rng):
+    """Kernel lookups on the loop table against a float64 lookup of the device's own records: s in a
+    span (ties within S_TOL aside) whose plane the segment to the light meets further than eps."""
+    lo, hi = method.mesh.bounds
+    pts = rng.uniform(lo - 0.5, hi + 0.5, (3000, 3))
+    got = method.classify(pts)
+    e = method.entries()
+    f = method.frame
+    lp = f.to_local(pts)
+    tab = dict(row=e["row"], face=np.arange(len(e["row"])), s_lo=e["s_lo"].astype(np.float64),
+               s_hi=e["s_hi"].astype(np.float64), plane=e["plane"].astype(np.float64))
+    want = ref.classify(lp, None, tab, f.t0, f.dt, f.rows, f.full_circle, f.point, method.eps)
+    k, s, _ = ref.receiver_keys(lp, f.t0, f.dt, f.rows, f.full_circle, f.point)
+    g = (ref.row_coordinate(lp, f.point) - f.t0) / f.dt
+    tie = np.abs(g - np.round(g)) < ref.ROW_TIE
+    for i in range(len(lp)):
+        sel = e["row"] == k[i]
+        ends = np.r_[e["s_lo"][sel], e["s_hi"][sel]]
+        if len(ends) and np.min(np.abs(ends - s[i])) < 10 * ref.S_TOL:
+            tie[i] = True
+    assert not np.any((got != want) & ~tie)
+    assert (~tie).sum() > 0.8 * len(lp)
+
+
+def test_loops_masks(device, rng):
+    """The loop table against exact: the torus's hole stays lit (its outer and inner loops bound one lit
+    region and pair together), and the ground under both the cube and the torus errs only in the
+    discretization band."""
+    light = sc.PointLight((0.3, 5, 0.2))
+    pts = ground_points(rng, 20000)
+    for mesh in (cube_over_plane(), torus_over_plane()):
+        exact = sc.shadow_mask(mesh, light, pts, method="exact", eps=EPS)
+        wrong = {}
+        for table in angular.TABLES:
+            for rows in (100, 400):
+                got = prepared(device, mesh, light, pts, theta_resolution=rows, table=table).classify(pts)
+                wrong[table, rows] = np.count_nonzero(got != exact)
+        # the faces table keeps to the half-row band (test_cube_over_plane_error_bound); on the ground both
+        # tables see the same shadow outline at the rows' centres, so the loop table may not do worse
+        for rows in (100, 400):
+            assert wrong["loops", rows] <= wrong["faces", rows] + 5, wrong
+        assert wrong["loops", 400] < wrong["loops", 100] < 0.01 * len(pts), wrong
+    # the hole: ground points seen through it from the light are lit
+    hole = pts[np.hypot(pts[:, 0] - 0.1, pts[:, 2] - 0.07) < 0.6]
+    mesh = torus_over_plane()
+    got = prepared(device, mesh, light, pts, theta_resolution=400, table="loops").classify(hole)
+    assert len(hole) > 50 and not got.any()
+
+
+def test_light_inside_closed_solid(device):
+    """A point light inside a closed solid: refused with a ValueError naming the light (every receiver
+    outside would be in shadow; no face turns to the light, so the table would say lit)."""
+    box = _box((1, 1, 1), (0, 1.5, 0))
+    inverted = trimesh.Trimesh(box.vertices, box.faces[:, ::-1], process=False)    # wound inwards: all faces lit
+    for mesh in (_mesh(box, _box((8, 0.2, 8), (0, -0.1, 0))), _mesh(inverted), cube_over_plane()):
+        for table in angular.TABLES:
+            with pytest.raises(ValueError, match="light.*inside a closed solid"):
+                prepared(device, mesh, sc.PointLight((0.1, 1.6, -0.2)), ground_points(np.random.default_rng(1), 10),
+                         table=table)
+    with pytest.raises(ValueError, match="light"):
+        sc.shadow_mask(cube_over_plane(), sc.PointLight((0.0, 1.5, 0.0)), [[3.0, 0.0, 3.0]], method="angular")
+    # outside it (just above the top), and a light in a room (inside the walls' ring, not their material): fine
+    prepared(device, cube_over_plane(), sc.PointLight((0.1, 2.01, -0.2)), ground_points(np.random.default_rng(1), 10))
+    scene = sc.Scene.load(SCENES / "hard" / "light_inside.toml")
+    angular.AngularMethod(device, theta_resolution=30).prepare(scene.mesh, scene.lights[0], scene.bounds, EPS)
+
+
 BAD = [
+    (lambda d: angular.AngularMethod(d, table="paper"), ValueError, "table"),
+    (lambda d: angular.AngularMethod(d, table=1), TypeError, "table"),
     (lambda d: angular.AngularMethod(d, theta_resolution=0), ValueError, "theta_resolution"),
     (lambda d: angular.AngularMethod(d, theta_resolution=1.5), TypeError, "theta_resolution"),
     (lambda d: angular.AngularMethod(d, theta_resolution=10**7), ValueError, "theta_resolution"),
@@ -408,3 +579,20 @@ def test_table_too_big(small_buffer_device):
     method = angular.AngularMethod(small_buffer_device, theta_resolution=angular.MAX_ROWS)
     with pytest.raises(ValueError, match="theta_resolution"):
         method.prepare(big, sc.PointLight((0.1, 5, 0.1)), big.bounds, EPS)
+
+
+def test_bench_quick(tmp_path):
+    """bench/angular.py --quick (about 7 s): runs, and its results hold both tables."""
+    import json
+    import sys
+    from conftest import PROJECT
+
+    sys.path.insert(0, str(PROJECT / "bench"))
+    import angular as bench  # noqa: E402  (bench/angular.py, not shadowcl.angular)
+
+    bench.main(["--quick", "--out", str(tmp_path)])
+    doc = json.loads((tmp_path / "angular-quick.json").read_text())
+    tables = {r.get("table") for r in doc["speed_error"] if r["method"] == "angular"}
+    assert tables == set(angular.TABLES)
+    assert {p["table"] for p in doc["scalability"]["points"]} == set(angular.TABLES)
+    assert "Tables at theta_resolution=None" in (tmp_path / "angular-quick.md").read_text()

@@ -27,6 +27,46 @@ Pipeline (kernels/angular.cl):
    between the pair's ends.
    Table faces: the light-facing faces of each closed manifold component (a blocked ray always crosses
    one); every face of an open or non-manifold component (a ray can be stopped by a hidden face there).
+3b. **The paper's table** (``table="loops"``, :func:`loop_pairs`): for the closed components, each ridge
+   edge's crossings with the rows it spans are counted, prefix-summed and filled on the device like the
+   face records (``edge_rows``, ``fill_edges``: s, the crossing point -- its r --, the way the loop goes in
+   theta); one work-item per row (``pair_rows``) sorts its crossings and pairs them by section 4's rule
+   (in s order a crossing going the way the group's first one goes waits, one going the other way closes
+   the oldest waiting: the chains leaving a local theta peak bound one span, so coils pair correctly).
+   The sort and pairing (``stats["pair_s"]``) took 6 ms / 49 ms for 57 k / 288 k crossings (10 000 /
+   100 000 cubes, 600 rows, 4 % of the prepare): on the device it pays, as the FIFO is a sequential scan
+   per row that NumPy cannot vectorise (a host version would be a Python loop over the crossings after
+   a read-back; not written, so that side is an estimate). What costs is host-side: chaining the loops
+   (silhouette_loops) and labelling regions and creases. Groups are *lit regions* (faces facing
+   the light joined across edges whose faces both face it) rather than single loops: a region's outer loop
+   and its holes' loops pair together, so a torus lit from above keeps its hole lit (loop by loop, the
+   outer loop's pair spans the hole and shadowed it: 1006 of 2276 ground points under it). Depth
+   (section 5): a pair's record holds the plane of its chord, the segment between its two crossing points,
+   i.e. r interpolated between the pair's ends; off the row's centre plane the chord plane follows the mean
+   of the two edges' directions (along the row plane's normal, receivers on the occluder's own lit cap fell
+   behind it: half of a slab's top). A chord cuts off a valley of the lit cap, so the region's concave
+   creases (edges between two lit faces folding inwards) enter "in duplicate" and cut the pairs they fall
+   in (A h1, h1 h2, ..., hn B) -- the paper's "visible edges in duplicate", only where the depth needs
+   them (convex creases lie in front of the chord). Hidden edges in duplicate (the paper's main form) were
+   not used: the far surface's chords would need the hidden faces' own chaining, which is what a face
+   record already is. A point light's rows end on the pole axis; a lit face it pierces adds a crossing
+   at s = +-1 in every row (without it the pillars round the pole in the light-inside scene lost their
+   shadows: 225 wrong pixels against 12). Open and non-manifold components keep face records in the same
+   rows (their hidden faces can stop rays, and their loops need not close).
+   Default ``table="faces"``, by bench/results/angular.md (same rows, same receivers, 2 shared cores):
+   on bunny, teapot and ogre (open meshes: their faces keep face records either way) the error is the
+   same and the loop table only adds the loop work (prepare + classify at the default rows 0.47 / 0.31 /
+   0.31 s against 0.39 / 0.21 / 0.29 s); on the 12 hard scenes the mean error is the same (0.00049 at
+   the default rows), the loop table better on contact, sphere_terminator, thin_occluder, shared_edges,
+   light_inside (the chord keeps a sphere's terminator band off the lit cap) and worse on coplanar and
+   far_offset (0.00110 / 0.00096 against 0.00028 / 0.00020). coplanar: receivers inside the other of two
+   interpenetrating boxes lie between the lit top and the chord below it, in front of the depth (never
+   visible: its render error is lower, 0.00015 against 0.00019); far_offset: not traced (false light
+   around the tube and the arch, concave solids, 21 of 25 wrong at 600 rows). The loop table is also
+   slower to build (1.33 s against 0.44 s at 100 000 cubes: the loops are chained on the host), though
+   faster to look up (0.060 s against 0.095 s for 500 000 receivers; a table 3.8 x smaller). Exact depth
+   from face planes also holds on every mesh without the chord's assumptions (no layered folds of one
+   lit region, a cap convex between creases).
 4. **Lookups**: per receiver, its row and ``s``; a binary search finds the records starting at or
    before ``s``, a backward scan tests them (first hit wins) and stops where the row's running maximum
    of ``s_hi`` falls below ``s`` (section 7 step 2, without walking the whole entry). ``classify_view``
@@ -41,6 +81,9 @@ Pipeline (kernels/angular.cl):
    pole is covered by one table whose rows wrap round at +-pi; no hemisphere split is needed, and rows
    are uniform in theta (the paper's finer rows near +-pi/2 compensate its tan-based coordinates, which
    these rows do not use).
+
+A point light inside a closed solid (winding number of a closed component round it >= 1/2) raises
+``ValueError``: every point outside that solid is in its shadow, and no face of it turns to the light.
 
 Discretization error: a receiver is judged with its occluders' spans at its row's centre, so it can
 differ from the exact method only when its ray passes within half a row (in theta; in Y for a
@@ -77,6 +120,7 @@ POLE_CLEARANCE = np.radians(5.0)   # a preferred pole axis is kept when this far
 FULL_CIRCLE_SPAN = np.radians(170.0)  # occluders spanning more theta than this get the whole circle
 ROWS_PER_LINE = 2              # render's default rows per scan line (view_rows): on the hard scenes at 160 x 90 the
                                # sphere terminator's wrong pixels went 385 / 183 / 67 at 1 / 2 / 4 per line
+TABLES = ("faces", "loops")
 RUN_PIECE = 64                 # classify_lines: receivers per work-item at most (a run never crosses a piece)
 SAMPLE = 20000                 # occluder vertices sampled for the frame choice
 
@@ -215,6 +259,21 @@ def rows_from_receivers(span: float, far: float, receiver_bounds: np.ndarray, ex
 # Table -----------------------------------------------------------------------------------------------------
 
 @dataclass
+class LoopSet:
+    """The paper's table input for the closed components: ridge-edge ``loops``, the lit region of each loop
+    edge in loop order (``regions``), and the concave ``creases`` ((K, 2) vertex ids) with theirs
+    (``crease_regions``); ``poles``: signed X of each point where the pole axis pierces a lit face (point
+    light), with its region (``pole_regions``)."""
+
+    loops: list
+    regions: np.ndarray
+    creases: np.ndarray
+    crease_regions: np.ndarray
+    poles: np.ndarray
+    pole_regions: np.ndarray
+
+
+@dataclass
 class Table:
     """One light's lookup table on the device: ``offsets`` (rows + 1) int32 CSR and ``records``
     (entries x 8) float32 (``s_lo, s_hi, nx, ny, nz, d, face, running max of s_hi``; face as int32 bits),
@@ -232,8 +291,10 @@ class Table:
 
 
 def build_table(device, local_vertices: np.ndarray, faces: np.ndarray, table_faces: np.ndarray, frame: Frame,
-                stats: dict | None = None) -> Table:
-    """The lookup table of ``table_faces`` (indices into ``faces``) with ``local_vertices`` in ``frame``."""
+                stats: dict | None = None, loops=None) -> Table:
+    """The lookup table of ``table_faces`` (indices into ``faces``) with ``local_vertices`` in ``frame``, plus,
+    when ``loops`` (a list of ridge-edge loops) is given, the pairs of the paper's loop table
+    (:func:`loop_pairs`) in the same rows."""
     stats = {} if stats is None else stats
     dev, queue = device, device.queue
     t0 = time.perf_counter()
@@ -251,30 +312,168 @@ def build_table(device, local_vertices: np.ndarray, faces: np.ndarray, table_fac
         dev.kernel("angular.cl", "face_rows", options)(queue, (n,), None, vertices_g, faces_g, ids_g, *scalars,
                                                        planes_g, first_g, nrows_g)
     counts = row_counts(dev.from_device(first_g, n, np.int32), dev.from_device(nrows_g, n, np.int32), rows)
+    pairs = None if loops is None else loop_pairs(dev, vertices_g, loops, frame, stats)
+    npairs = np.zeros(rows, dtype=np.int64) if pairs is None else pairs[2]
+    counts = counts + npairs
     t1 = time.perf_counter()
     # Exclusive prefix sum of one count per row: a few kB, cheaper on the host than a device scan's launches.
     offsets = np.zeros(rows + 1, dtype=np.int64)
     np.cumsum(counts, out=offsets[1:])
     entries = int(offsets[-1])
     nbytes = 4 * REC_FLOATS * entries
-    if entries >= 2**31 or nbytes > dev.max_alloc_bytes:
-        raise ValueError(f"theta_resolution: {rows} rows give a table of {entries} records ({nbytes >> 20} MiB), "
-                         f"more than the device holds in one buffer ({dev.max_alloc_bytes >> 20} MiB); use fewer rows")
+    check_capacity(dev, entries, rows, "table records")
     offsets_g = dev.to_device(offsets.astype(np.int32))
     records_g = dev.empty(max(nbytes, 4 * REC_FLOATS), "angular table records")
+    t2 = time.perf_counter()
     if entries:
-        cursor_g = dev.to_device(np.zeros(rows, dtype=np.int32))
-        dev.kernel("angular.cl", "fill_rows", options)(queue, (n,), None, vertices_g, faces_g, ids_g, *scalars,
-                                                       planes_g, first_g, nrows_g, offsets_g, cursor_g, records_g)
-        t2 = time.perf_counter()
+        if pairs is not None:      # the loop pairs first in each row, the face records after them
+            dev.kernel("angular.cl", "copy_pairs", options)(queue, (rows,), None, pairs[1], pairs[3], offsets_g,
+                                                            np.int32(rows), np.int32(pairs[4]), pairs[0], records_g)
+        cursor_g = dev.to_device(npairs.astype(np.int32))
+        if n:
+            dev.kernel("angular.cl", "fill_rows", options)(queue, (n,), None, vertices_g, faces_g, ids_g, *scalars,
+                                                           planes_g, first_g, nrows_g, offsets_g, cursor_g, records_g)
         queue.finish()
         t2 = time.perf_counter()
         dev.kernel("angular.cl", "sort_rows", options)(queue, (rows,), None, offsets_g, np.int32(rows), records_g)
     queue.finish()
     t3 = time.perf_counter()
-    stats.update(count_s=t1 - t0, fill_s=(t2 - t1) if entries else 0.0, sort_s=(t3 - t2) if entries else 0.0,
+    stats.update(count_s=t1 - t0, fill_s=t2 - t1, sort_s=t3 - t2,
                  entries=entries, rows=rows, max_row=int(counts.max(initial=0)), table_bytes=4 * (rows + 1) + nbytes)
     return Table(frame, offsets_g, records_g, entries, np.asarray(table_faces, dtype=np.int32))
+
+
+def loop_pairs(device, vertices_g, loops, frame: Frame, stats: dict):
+    """The paper's loop table on the device (sections 3-4, 7.1 steps 1.3-1.5): every ridge edge's crossings
+    with the rows it spans (counted, prefix-summed, filled: ``edge_rows``, ``fill_edges``), then per row
+    the crossings sorted by (loop, s) and paired loop by loop with section 4's rule (``pair_rows``, one
+    work-item per row: the pairing is a sequential scan per loop, cheap next to the fill). Returns
+    (pairs buffer, its row offsets buffer, (rows,) pairs per row, that count's buffer); a pair record
+    holds its span and the plane of its chord (depth interpolated between the pair's ends)."""
+    dev, queue, rows = device, device.queue, frame.rows
+    options = frame_options(frame)
+    chains = [np.asarray(loop.vertices, dtype=np.int32) for loop in loops.loops]
+    ridge = np.concatenate(chains) if chains else np.zeros(0, dtype=np.int32)
+    length = np.array([len(c) for c in chains], dtype=np.int64)
+    after = np.arange(1, len(ridge) + 1)
+    after[np.cumsum(length) - 1] = np.cumsum(length) - length         # each chain's last edge closes it
+    tails = np.concatenate([ridge, loops.creases[:, 0].astype(np.int32)])
+    heads = np.concatenate([ridge[after] if len(ridge) else ridge, loops.creases[:, 1].astype(np.int32)])
+    group = np.concatenate([loops.regions, loops.crease_regions]).astype(np.int32)
+    ne, nridge = len(tails), len(tails) - len(loops.creases)
+    tails_g, heads_g = dev.to_device(tails), dev.to_device(heads)
+    first_g, count_g = dev.empty(4 * max(ne, 1), "edge first rows"), dev.empty(4 * max(ne, 1), "edge row counts")
+    scalars = (np.int32(ne), np.float32(frame.t0), np.float32(frame.dt), np.int32(rows))
+    if ne:
+        dev.kernel("angular.cl", "edge_rows", options)(queue, (ne,), None, vertices_g, tails_g, heads_g, *scalars,
+                                                       first_g, count_g)
+    npoles = len(loops.poles)            # pole crossings: one per pierced lit face, in every row
+    counts = row_counts(dev.from_device(first_g, ne, np.int32), dev.from_device(count_g, ne, np.int32), rows) + npoles
+    offsets = np.zeros(rows + 1, dtype=np.int64)
+    np.cumsum(counts, out=offsets[1:])
+    crossings = int(offsets[-1])
+    check_capacity(dev, crossings, rows, "ridge-edge and crease crossings")
+    offsets_g = dev.to_device(offsets.astype(np.int32))
+    cross_g = dev.empty(4 * REC_FLOATS * max(crossings, 1), "ridge-edge crossings")
+    queue_g = dev.empty(4 * max(crossings, 1), "pairing queue")
+    npairs_g = dev.to_device(np.zeros(rows, dtype=np.int32))
+    cap = 1                  # a row has fewer pairs than crossings unless a duplicate falls in several pairs (coils)
+    if crossings:
+        cursor_g = dev.to_device(np.full(rows, npoles, dtype=np.int32))
+        if npoles:
+            dev.kernel("angular.cl", "fill_poles", options)(
+                queue, (rows,), None, dev.to_device(loops.poles.astype(np.float32)),
+                dev.to_device(loops.pole_regions.astype(np.int32)), np.int32(npoles), np.int32(rows), offsets_g, cross_g)
+        if ne:
+            dev.kernel("angular.cl", "fill_edges", options)(
+                queue, (ne,), None, vertices_g, tails_g, heads_g, dev.to_device(group), np.int32(ne), np.int32(nridge),
+                *scalars[1:], first_g, count_g, offsets_g, cursor_g, cross_g)
+    queue.finish()
+    t_pair = time.perf_counter()
+    while True:
+        check_capacity(dev, cap * crossings, rows, "loop pairs")
+        pairs_g = dev.empty(4 * REC_FLOATS * max(cap * crossings, 1), "loop pairs")
+        overflow_g = dev.to_device(np.zeros(1, dtype=np.int32))
+        if crossings:
+            dev.kernel("angular.cl", "pair_rows", options)(
+                queue, (rows,), None, offsets_g, np.int32(rows), np.float32(frame.t0), np.float32(frame.dt),
+                vertices_g, tails_g, heads_g, np.int32(cap), cross_g, queue_g, pairs_g, npairs_g, overflow_g)
+        if dev.from_device(overflow_g, 1, np.int32)[0] == 0:
+            break
+        cap *= 2
+    npairs = dev.from_device(npairs_g, rows, np.int32).astype(np.int64)
+    stats["pair_s"] = time.perf_counter() - t_pair          # the sort and section-4 pairing on the device
+    stats.update(loops=len(chains), regions=len(np.unique(group)), ridge_edges=nridge, creases=ne - nridge, poles=npoles,
+                 crossings=crossings, pairs=int(npairs.sum()), pair_capacity=cap)
+    return pairs_g, offsets_g, npairs, npairs_g, cap
+
+
+def lit_regions(adjacency, facing: np.ndarray) -> np.ndarray:
+    """(F,) int: connected regions of light-facing faces (joined across edges with both faces facing the
+    light), -1 for the others. The loops bounding one region (an outer loop and its holes) pair together."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    pairs = adjacency.edge_faces[adjacency.face_count == 2]
+    both = facing[pairs[:, 0]] & facing[pairs[:, 1]]
+    nfaces = len(facing)
+    graph = coo_matrix((np.ones(int(both.sum())), (pairs[both, 0], pairs[both, 1])), shape=(nfaces, nfaces))
+    label = connected_components(graph, directed=False)[1]
+    return np.where(facing, label, -1)
+
+
+def edge_regions(adjacency, facing: np.ndarray, edges: np.ndarray, regions: np.ndarray) -> np.ndarray:
+    """(len(edges),) int32: the lit region (``regions``, per face) of each edge's (first) light-facing face."""
+    two = adjacency.edge_faces[edges]
+    lit = np.where(facing[two[:, 0]], two[:, 0], two[:, 1])
+    return regions[lit].astype(np.int32)
+
+
+def concave_creases(adjacency, facing: np.ndarray) -> np.ndarray:
+    """Edges between two light-facing faces where the surface folds inwards (the far corner of one face
+    lies on the outer side of the other's plane): a valley seen from the light, which a chord between the
+    loop's crossings would cut off. Section 5 inserts such edges in duplicate for depth; the convex ones
+    lie in front of the chord and need none."""
+    two = adjacency.face_count == 2
+    ids = np.flatnonzero(two)
+    f = adjacency.edge_faces[ids]
+    ids, f = ids[facing[f[:, 0]] & facing[f[:, 1]]], f[facing[f[:, 0]] & facing[f[:, 1]]]
+    v = np.asarray(adjacency.vertices, dtype=np.float64)
+    tri = v[adjacency.faces[f[:, 0]]]
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    other = adjacency.faces[f[:, 1]]
+    ends = adjacency.edges[ids]
+    far = other.sum(axis=1) - ends.sum(axis=1)                     # the corner of face 2 off the edge
+    out = v[far] - v[ends[:, 0]]
+    rise = np.einsum("ij,ij->i", normal, out)
+    return ids[rise > 1e-6 * np.linalg.norm(normal, axis=1) * np.linalg.norm(out, axis=1)]
+
+
+def pole_hits(adjacency, facing: np.ndarray, regions: np.ndarray, local) -> tuple[np.ndarray, np.ndarray]:
+    """Where the pole axis (frame X, through a point light at the origin) pierces a light-facing face: (signed X
+    of the hit, region). Every row's half-plane ends on that axis, so a lit region pierced there is cut in
+    every row between a loop crossing and the pole: the pole enters the pairing as a crossing (s = +-1).
+    None for a directional light (``local`` None: parallel rows)."""
+    if local is None:
+        return np.zeros(0), np.zeros(0, dtype=np.int32)
+    lit = np.flatnonzero(facing)
+    tri = np.asarray(local, dtype=np.float64)[adjacency.faces[lit]]
+    u, v = tri[:, :, 1], -tri[:, :, 2]
+    e = [u[:, i] * v[:, (i + 1) % 3] - v[:, i] * u[:, (i + 1) % 3] for i in range(3)]
+    around = ((e[0] >= 0) & (e[1] >= 0) & (e[2] >= 0)) | ((e[0] <= 0) & (e[1] <= 0) & (e[2] <= 0))
+    tri = tri[around]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    ok = np.abs(n[:, 0]) > 0
+    x = np.einsum("ij,ij->i", n[ok], tri[ok, 0]) / n[ok, 0]           # the plane met on the axis
+    return x, regions[lit[around][ok]].astype(np.int32)
+
+
+def check_capacity(device, entries: int, rows: int, what: str) -> None:
+    """Raise ``ValueError`` (naming theta_resolution) when ``entries`` records do not fit one device buffer."""
+    nbytes = 4 * REC_FLOATS * entries
+    if entries >= 2**31 or nbytes > device.max_alloc_bytes:
+        raise ValueError(f"theta_resolution: {rows} rows give {entries} {what} ({nbytes >> 20} MiB), more than "
+                         f"the device holds in one buffer ({device.max_alloc_bytes >> 20} MiB); use fewer rows")
 
 
 def row_counts(first: np.ndarray, count: np.ndarray, rows: int) -> np.ndarray:
@@ -296,19 +495,22 @@ def frame_options(frame: Frame, normals: bool = False) -> tuple[str, ...]:
 
 
 def table_entries(device, table: Table) -> dict:
-    """The table read back: ``offsets``, ``row`` (E,), ``face``, ``s_lo``, ``s_hi``, ``plane`` (E, 4), rows in
-    order, each sorted by s_lo."""
+    """The table read back: ``offsets``, ``row`` (E,), ``face`` (a face record's face, -(region + 1) for a
+    loop pair), ``region`` (a loop pair's lit region, -1 for face records), ``s_lo``, ``s_hi``, ``plane``
+    (E, 4), rows in order, each sorted by s_lo."""
     rows = table.frame.rows
     offsets = device.from_device(table.offsets, rows + 1, np.int32)
     rec = device.from_device(table.records, (max(table.entries, 1), REC_FLOATS), np.float32)[:table.entries]
-    return dict(offsets=offsets, row=np.repeat(np.arange(rows), np.diff(offsets)), face=rec[:, 6].view(np.int32),
-                s_lo=rec[:, 0], s_hi=rec[:, 1], plane=rec[:, 2:6])
+    ident = rec[:, 6].view(np.int32)
+    return dict(offsets=offsets, row=np.repeat(np.arange(rows), np.diff(offsets)), face=ident,
+                region=np.where(ident < 0, -ident - 1, -1), s_lo=rec[:, 0], s_hi=rec[:, 1], plane=rec[:, 2:6])
 
 
-def closed_faces(adjacency) -> np.ndarray:
-    """(F,) bool: faces of connected components (faces joined by shared edges) that are closed manifolds,
-    consistently wound: there a blocked ray always crosses a light-facing face, so only those enter the
-    table; the other components' faces all enter (a hidden face of an open mesh can stop a ray)."""
+def closed_faces(adjacency) -> tuple[np.ndarray, np.ndarray]:
+    """((F,) bool, (F,) int): faces of connected components (faces joined by shared edges) that are closed
+    manifolds, consistently wound, and each face's component label. In a closed component a blocked ray
+    always crosses a light-facing face, so only those enter the table; the other components' faces all
+    enter (a hidden face of an open mesh can stop a ray)."""
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
@@ -322,7 +524,7 @@ def closed_faces(adjacency) -> np.ndarray:
     bad[adjacency.misoriented_edges] = True
     open_label = np.zeros(label.max(initial=-1) + 1, dtype=bool)
     open_label[label[adjacency.face_items[np.isin(owner, np.flatnonzero(bad))]]] = True
-    return ~open_label[label]
+    return ~open_label[label], label
 
 
 # Method ----------------------------------------------------------------------------------------------------
@@ -346,13 +548,22 @@ class AngularMethod:
                                    "receiver; 600 when their number is unknown), and for render from the image "
                                    "(ROWS_PER_LINE rows per scan line)"),
         "expected_receivers": (None, "about how many receivers are coming, used to pick theta_resolution"),
+        "table": ("faces", "'faces': one span record per (light-facing face, row), exact depth from the face plane; "
+                           "'loops': the paper's table, the ridge-edge loops' crossings paired per loop (section 4), "
+                           "depth interpolated between a pair's ends (see the module docstring for the choice)"),
         "runs": (True, "classify_view: one lookup serves a run of pixels on a scan line (False: one per pixel)"),
         "prefer_x": (None, "preferred pole axis (world vector); None: away from the occluders, and for render "
                            "the camera's right axis when it is clear of them (rows along the scan lines)"),
     }
 
-    def __init__(self, device, theta_resolution=None, expected_receivers=None, runs=True, prefer_x=None):
+    def __init__(self, device, theta_resolution=None, expected_receivers=None, runs=True, prefer_x=None,
+                 table="faces"):
         self.device = device
+        if not isinstance(table, str):
+            raise TypeError(f"table: expected 'faces' or 'loops', got {type(table).__name__}")
+        if table not in TABLES:
+            raise ValueError(f"table: expected one of {TABLES}, got {table!r}")
+        self.table_kind = table
         self.theta_resolution = _optional_int("theta_resolution", theta_resolution, 1, MAX_ROWS)
         self.expected_receivers = _optional_int("expected_receivers", expected_receivers, 0)
         if not isinstance(runs, (bool, np.bool_)):
@@ -364,7 +575,7 @@ class AngularMethod:
         self._fp64 = "cl_khr_fp64" in device.cl_device.extensions   # receivers moved into the frame on the device
 
     def __repr__(self) -> str:
-        return f"AngularMethod(theta_resolution={self.theta_resolution}, runs={self.runs})"
+        return f"AngularMethod(theta_resolution={self.theta_resolution}, table={self.table_kind!r}, runs={self.runs})"
 
     # prepare -------------------------------------------------------------------------------------------
     def prepare(self, mesh: Mesh, light, receiver_bounds, eps: float, prefer_x=None, rows=None) -> None:
@@ -382,7 +593,9 @@ class AngularMethod:
         point = isinstance(light, PointLight)
         adjacency = edge_adjacency(mesh)
         sil = silhouette_edges(self.device, adjacency, light)
-        closed = closed_faces(adjacency)
+        closed, label = closed_faces(adjacency)
+        if point:
+            light_inside(mesh, light, closed, label)
         keep = np.where(closed, sil.facing, True)
         keep[adjacency.collapsed_faces] = False
         table_faces = np.flatnonzero(keep)
@@ -420,12 +633,45 @@ class AngularMethod:
             pad = 0.5 * span / rows
             lo, hi = lo - pad, hi + pad
         frame = Frame(origin, rotation, point, lo, (hi - lo) / rows, rows, full)
-        self.stats = dict(setup_s=t1 - t0, table_faces=len(table_faces), closed=bool(closed.all()), full_circle=full)
-        self.table = build_table(self.device, local, mesh.faces, table_faces, frame, self.stats)
+        loops = None
+        if self.table_kind == "loops":
+            # closed components by their loops (the row range above already covers them); open or
+            # non-manifold ones keep a face record per face (a hidden face there can stop a ray)
+            loops = self._closed_loops(mesh, adjacency, sil, closed, light, local if point else None)
+            table_faces = table_faces[~closed[table_faces]]
+        self.stats = dict(setup_s=t1 - t0, table_faces=len(table_faces), closed=bool(closed.all()), full_circle=full,
+                          table=self.table_kind)
+        self.table = build_table(self.device, local, mesh.faces, table_faces, frame, self.stats, loops)
+        self.loops = loops
         self.stats["prepare_s"] = time.perf_counter() - t0
         self.mesh, self.light, self.eps, self.frame, self._box = mesh, light, float(eps), frame, box
         self._sample = sample
         self._directions = _unit_directions(light, mesh.vertices[sample]) if point else np.zeros((0, 3))
+
+    def _closed_loops(self, mesh, adjacency, sil, closed, light, local):
+        """(loops, region of each loop edge) of the closed components: the ridge-edge loops (checked as in
+        :func:`ridge_loops`) and, per edge in loop order, the lit region (:func:`lit_regions`) it bounds."""
+        if not closed.any():
+            return LoopSet([], np.zeros(0, np.int32), np.zeros((0, 2), np.int32), np.zeros(0, np.int32), np.zeros(0),
+                           np.zeros(0, np.int32))
+        try:                      # the whole mesh's loops, those of the closed components kept
+            check_even_count(sil)
+            loops = [loop for loop in silhouette_loops(sil) if closed[adjacency.edge_faces[loop.edges[0], 0]]]
+            lit = sil.facing & closed
+        except ValueError:        # an open part is non-manifold or misoriented: the closed part's own loops
+            part = closed.copy()
+            part[adjacency.collapsed_faces] = False
+            sil = silhouette_edges(self.device, edge_adjacency(Mesh(mesh.vertices, mesh.faces[part])), light)
+            check_even_count(sil)
+            loops = silhouette_loops(sil)
+            lit = sil.facing
+        edges = np.concatenate([loop.edges for loop in loops]) if loops else np.zeros(0, dtype=np.int64)
+        adj = sil.adjacency
+        regions = lit_regions(adj, lit)
+        creases = concave_creases(adj, lit)
+        poles, pole_regions = pole_hits(adj, lit, regions, local)
+        return LoopSet(loops, edge_regions(adj, lit, edges, regions), adj.edges[creases],
+                       edge_regions(adj, lit, creases, regions), poles, pole_regions)
 
     # classify ------------------------------------------------------------------------------------------
     def _inputs(self, points, normals):
@@ -538,6 +784,41 @@ class AngularMethod:
     def entries(self) -> dict:
         """The table read back (see :func:`table_entries`)."""
         return table_entries(self.device, self.table)
+
+
+def light_inside(mesh: Mesh, light, closed: np.ndarray, label: np.ndarray) -> None:
+    """Raise ``ValueError`` when point ``light`` is inside a closed component (winding number of the
+    component round the light, by the solid angles of its faces, at least 1/2 in size). There no face
+    turns to the light (or all do, wound inwards), the table would be empty or the far wall's, and every
+    receiver would come out lit; the shadow is everything outside the solid, not what this method models.
+    Only components whose bounding box holds the light are summed (1.1 s for 1.2 M faces otherwise)."""
+    if not isinstance(light, PointLight) or not closed.any():
+        return
+    ids = np.flatnonzero(closed)
+    vertex_label = np.full(len(mesh.vertices), -1, dtype=np.int64)
+    vertex_label[mesh.faces[ids]] = label[ids, None]
+    used = vertex_label >= 0
+    vl, side = vertex_label[used], mesh.vertices[used] < light.position
+    # the box holds the light when the component has vertices on both sides of it along every axis
+    n = int(label.max()) + 1
+    holds = np.ones(n, dtype=bool)
+    for axis in range(3):
+        below = np.bincount(vl, weights=side[:, axis], minlength=n)
+        holds &= (below > 0) & (below < np.bincount(vl, minlength=n))
+    for c in np.flatnonzero(holds):
+        part = ids[label[ids] == c]
+        v = mesh.vertices[mesh.faces[part]].astype(np.float64) - light.position
+        a, b, d = v[:, 0], v[:, 1], v[:, 2]
+        la, lb, ld = (np.linalg.norm(x, axis=1) for x in (a, b, d))
+        det = np.einsum("ij,ij->i", a, np.cross(b, d))
+        den = la * lb * ld + np.einsum("ij,ij->i", a, b) * ld + np.einsum("ij,ij->i", a, d) * lb \
+            + np.einsum("ij,ij->i", b, d) * la
+        winding = 2 * np.arctan2(det, den).sum() / (4 * np.pi)      # signed solid angles (Van Oosterom & Strackee)
+        if abs(winding) > 0.5:
+            raise ValueError(f"light: the point light at {light.position.tolist()} is inside a closed solid "
+                             f"({len(part)} faces); everything outside that solid is in its shadow, which "
+                             "the angular table cannot represent (no face of it turns to the light): move the "
+                             "light out or open the mesh")
 
 
 def _around_pole(local: np.ndarray, faces: np.ndarray) -> bool:

@@ -1,5 +1,7 @@
-"""Float64 reference of the angular method: ridge edges, the span table, lookups, and the paper's
-loop-only table with the pairing of section 4. Written from the paper; never calls ``shadowcl.angular``.
+"""Float64 reference of the angular method: ridge edges, the span table, lookups, the paper's pairing
+of section 4 for one loop, and the loop table as ``table="loops"`` builds it (:func:`loop_table`: pairs
+per lit region, cut at concave creases, pole crossings). Written from the paper; never calls
+``shadowcl.angular``.
 
 The frame (rotation, origin, rows) is an input here: its choice is a heuristic of the method, the
 table and the lookups given a frame are what is checked. Coordinates: a point light at the origin,
@@ -226,3 +228,103 @@ def covered(pairs, s) -> np.ndarray:
     for lo, hi in pairs:
         out |= (s >= lo) & (s <= hi)
     return out
+
+
+# The paper's table as the device builds it (table="loops") -----------------------------------------------
+
+def _components(n, links) -> np.ndarray:
+    """Labels of the connected components of ``n`` items joined by ``links`` (union-find)."""
+    parent = list(range(n))
+
+    def root(i):
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for a, b in links:
+        parent[root(a)] = root(b)
+    return np.array([root(i) for i in range(n)], dtype=np.int64)
+
+
+def loop_table(local_vertices, faces, chains, t0, dt, rows, full_circle, point) -> dict:
+    """The paper's table of a closed, consistently wound mesh (frame coordinates) whose ridge-edge loops are
+    ``chains`` (vertex lists, each edge tail -> head as its light-facing face runs along it).
+
+    Per row (centre tk), every crossing of a ridge edge with the row's half-plane (plane for a directional
+    light) is keyed by s; so are the points where the pole axis pierces a light-facing face (s = +-1, point
+    light). Crossings are grouped by the lit region (light-facing faces joined across edges with both faces
+    lit) of their face and paired per region by section 4's rule (:func:`paper_pairs`); each pair is cut at
+    the crossings of the region's concave creases (edges between two lit faces folding inwards) inside it,
+    the duplicates of section 5. Returns arrays ``row``, ``s_lo``, ``s_hi``, ``region``, ``a``, ``b`` (the
+    (P, 3) end points), sorted by (row, s_lo, s_hi)."""
+    v = np.asarray(local_vertices, dtype=np.float64)
+    faces = np.asarray(faces, dtype=np.int64)
+    lit = facing(v, faces, point)
+    owner, links = {}, []
+    for f, tri in enumerate(faces.tolist()):
+        for a, b in ((tri[0], tri[1]), (tri[1], tri[2]), (tri[2], tri[0])):
+            owner[(a, b)] = f
+    for (a, b), f in owner.items():
+        g = owner.get((b, a))
+        if g is not None and lit[f] and lit[g]:
+            links.append((f, g))
+    region = _components(len(faces), links)
+    edges = []                                                       # (tail, head, region, kind)
+    for chain in chains:
+        chain = list(chain)
+        for tail, head in zip(chain, chain[1:] + chain[:1]):
+            edges.append((tail, head, region[owner[(tail, head)]], 0))
+    for (a, b), f in owner.items():
+        g = owner.get((b, a))
+        if a < b and g is not None and lit[f] and lit[g]:
+            tri = v[faces[f]]
+            n = np.cross(tri[1] - tri[0], tri[2] - tri[0])
+            far = v[int(sum(faces[g]) - a - b)] - v[a]
+            if n @ far > 1e-6 * np.linalg.norm(n) * np.linalg.norm(far):
+                edges.append((a, b, region[f], 1))
+    poles = []                                                       # (x, region)
+    if point:
+        for f in np.flatnonzero(lit):
+            tri = v[faces[f]]
+            u, w = tri[:, 1], -tri[:, 2]
+            e = np.array([u[i] * w[(i + 1) % 3] - w[i] * u[(i + 1) % 3] for i in range(3)])
+            n = np.cross(tri[1] - tri[0], tri[2] - tri[0])
+            if (np.all(e >= 0) or np.all(e <= 0)) and n[0] != 0:
+                poles.append((n @ tri[0] / n[0], region[f]))
+    out = []
+    for k in range(rows):
+        tk = t0 + (k + 0.5) * dt
+        if point:
+            m, wdir = np.array([0.0, np.cos(tk), np.sin(tk)]), np.array([0.0, np.sin(tk), -np.cos(tk)])
+        cuts = {}
+        for tail, head, reg, kind in edges:
+            p, q = v[tail], v[head]
+            a, b = (p @ m, q @ m) if point else (p[1] - tk, q[1] - tk)
+            if (a > 0) == (b > 0):
+                continue
+            c = p + a / (a - b) * (q - p)
+            if point and c @ wdir <= 0:
+                continue
+            s = c[0] / np.linalg.norm(c) if point else c[0]
+            cuts.setdefault(reg, []).append((kind, s, 1 if b > a else -1, c))
+        for x, reg in poles:
+            cuts.setdefault(reg, []).append((0, float(np.sign(x)), int(np.sign(x)), np.array([x, 0.0, 0.0])))
+        for reg, items in cuts.items():
+            ridge = sorted((c for c in items if c[0] == 0), key=lambda c: c[1])
+            dups = sorted((c for c in items if c[0] == 1), key=lambda c: c[1])
+            if not ridge:
+                continue
+            opener, waiting = ridge[0][2], []
+            for c in ridge:
+                if c[2] == opener or not waiting:
+                    waiting.append(c)
+                    continue
+                start = waiting.pop(0)
+                chain = [start] + [d for d in dups if start[1] < d[1] < c[1]] + [c]
+                for p0, p1 in zip(chain, chain[1:]):
+                    out.append((k, min(p0[1], p1[1]), max(p0[1], p1[1]), reg, p0[3], p1[3]))
+    out.sort(key=lambda r: (r[0], r[1], r[2]))
+    return dict(row=np.array([r[0] for r in out], dtype=np.int64), s_lo=np.array([r[1] for r in out]),
+                s_hi=np.array([r[2] for r in out]), region=np.array([r[3] for r in out], dtype=np.int64),
+                a=np.array([r[4] for r in out]).reshape(-1, 3), b=np.array([r[5] for r in out]).reshape(-1, 3))
