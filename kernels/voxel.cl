@@ -36,6 +36,19 @@ INLINE float to_light(float ax, float ay, float az, float lx, float ly, float lz
 #endif
 }
 
+/* Sample s = corner s & 3 of leaf s >> 2: its position A, normal N and unit direction b to the light.
+ * 0 when N faces away from the light (N.b <= 0: in shadow, DESIGN.md's rule). */
+INLINE int lit_side(__global const uint *leaves, __global const float *normals, int s, float lx, float ly, float lz,
+                    float *ax, float *ay, float *az, float *nx, float *ny, float *nz, float *bx, float *by, float *bz)
+{
+    __global const uint *r = leaves + LEAF_WORDS * (s >> 2);
+    const int c = s & 3;
+    *ax = as_float(r[4 + 3 * c]); *ay = as_float(r[5 + 3 * c]); *az = as_float(r[6 + 3 * c]);
+    *nx = normals[3 * s]; *ny = normals[3 * s + 1]; *nz = normals[3 * s + 2];
+    to_light(*ax, *ay, *az, lx, ly, lz, bx, by, bz);
+    return dot3(*nx, *ny, *nz, *bx, *by, *bz) > 0.0f;
+}
+
 /* Per leaf: its quad (12 floats, for the light-space lists), its two triangles (0, 1, 2) and (0, 2, 3)
  * (18 floats, for dot5 records), the unit normals du x dv at its corners (12 floats; at an
  * extraordinary vertex, where the derivatives vanish, a quarter step into the leaf), its sort key
@@ -132,13 +145,8 @@ __kernel void topology_shadow(__global const uint *leaves, int nsamples, __globa
     const int s = get_global_id(0);
     if (s >= nsamples)
         return;
-    const int l = s >> 2, c = s & 3;
-    __global const uint *r = leaves + LEAF_WORDS * l;
-    const float ax = as_float(r[4 + 3 * c]), ay = as_float(r[5 + 3 * c]), az = as_float(r[6 + 3 * c]);
-    const float nx = normals[3 * s], ny = normals[3 * s + 1], nz = normals[3 * s + 2];
-    float bx, by, bz;
-    to_light(ax, ay, az, lx, ly, lz, &bx, &by, &bz);
-    if (dot3(nx, ny, nz, bx, by, bz) <= 0.0f) {
+    float ax, ay, az, nx, ny, nz, bx, by, bz;
+    if (!lit_side(leaves, normals, s, lx, ly, lz, &ax, &ay, &az, &nx, &ny, &nz, &bx, &by, &bz)) {
         state[s] = 2;
         return;
     }
@@ -199,13 +207,8 @@ __kernel void offset_shadow(__global const uint *leaves, int nsamples, __global 
     const int s = get_global_id(0);
     if (s >= nsamples)
         return;
-    __global const uint *r = leaves + LEAF_WORDS * (s >> 2);
-    const int c = s & 3;
-    const float ax = as_float(r[4 + 3 * c]), ay = as_float(r[5 + 3 * c]), az = as_float(r[6 + 3 * c]);
-    const float nx = normals[3 * s], ny = normals[3 * s + 1], nz = normals[3 * s + 2];
-    float bx, by, bz;
-    to_light(ax, ay, az, lx, ly, lz, &bx, &by, &bz);
-    if (dot3(nx, ny, nz, bx, by, bz) <= 0.0f) {
+    float ax, ay, az, nx, ny, nz, bx, by, bz;
+    if (!lit_side(leaves, normals, s, lx, ly, lz, &ax, &ay, &az, &nx, &ny, &nz, &bx, &by, &bz)) {
         state[s] = 2;
         return;
     }

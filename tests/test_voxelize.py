@@ -339,3 +339,14 @@ def test_open_surface_boundary_is_the_table_boundary(device):
     on_open = (((v == 0) & (nb[:, 0] < 0)) | ((u == 1) & (nb[:, 1] < 0)) | ((v == 1) & (nb[:, 2] < 0))
                | ((u == 0) & (nb[:, 3] < 0)))
     assert np.all(on_open)
+
+
+def test_leaves_come_out_in_the_same_order_every_run(device):
+    """Leaves are appended by atomics in any order; the voxelizer sorts them so runs are reproducible."""
+    table = vz.grid_patch_table(torus_net(), True, True)
+    first, second = vz.voxelize(device, table, 48, 26), vz.voxelize(device, table, 48, 26)
+    assert len(first.leaves) > 1000
+    np.testing.assert_array_equal(first.leaves, second.leaves)
+    keys = first.leaves[:, :4].astype(np.int64)
+    assert np.all(np.diff(np.lexsort(keys[:, ::-1].T)) == 1)      # sorted by (patch, level, iu, iv)
+    np.testing.assert_array_equal(first.tessellate().mesh.faces, second.tessellate().mesh.faces)

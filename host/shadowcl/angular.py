@@ -107,9 +107,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .checks import check_bounds, finite_array, positive_int, vector3
+from .checks import finite_array, positive_int, vector3
 from .geometry import Mesh
 from .lights import PointLight, check_light
+from .methods import check_prepare
 from .silhouette import edge_adjacency, silhouette_edges, silhouette_loops
 
 REC_FLOATS = 8                 # kernels/angular.cl: REC
@@ -583,12 +584,7 @@ class AngularMethod:
 
         ``prefer_x`` and ``rows`` override the pole axis and the row count for this build
         (:meth:`classify_view` rebuilds with the camera's right axis and the image's own limit)."""
-        if not isinstance(mesh, Mesh):
-            raise TypeError(f"mesh: expected a Mesh, got {type(mesh).__name__}")
-        light = check_light(light)
-        box = check_bounds("receiver_bounds", receiver_bounds)
-        if not (np.isfinite(eps) and eps >= 0):
-            raise ValueError(f"eps: must be a finite non-negative distance, got {eps!r}")
+        light, box = check_prepare(mesh, light, receiver_bounds, eps)
         t0 = time.perf_counter()
         point = isinstance(light, PointLight)
         adjacency = edge_adjacency(mesh)

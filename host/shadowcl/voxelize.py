@@ -295,6 +295,12 @@ def voxelize(device, surface_or_table, resolution: int, connectivity: int = 26,
             items_out = dev.empty(16 * out_cap, "voxelization queue")
         level += 1
     leaves = dev.from_device(leaves_g, (nleaves, LEAF_WORDS), np.uint32)
+    # Work-items append leaves through an atomic counter, so their order varies from run to run: sort them
+    # by (patch, level, iu, iv) so a voxelization, its leaf ids and its tessellation are reproducible.
+    order = np.lexsort(leaves[:, 3::-1].T)
+    if np.any(order != np.arange(nleaves)):
+        leaves = np.ascontiguousarray(leaves[order])
+        cl.enqueue_copy(queue, leaves_g, leaves)
     queue.finish()
     elapsed = time.perf_counter() - t0
     stats = dict(resolution=resolution, connectivity=connectivity, patches=npatch, leaves=nleaves,

@@ -33,7 +33,6 @@ def _beams(points, light_point, light_vec):
 def topology(corners, voxels, normals, light_point: bool, light_vec, resolution: int):
     """(states (S,) uint8 1 lit / 2 shadowed, unsure (S,) bool) for the samples = leaf corners in order."""
     corners = np.asarray(corners, dtype=np.float64)
-    n = len(corners)
     A = corners.reshape(-1, 3)
     N = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
     light_vec = np.asarray(light_vec, dtype=np.float64)
