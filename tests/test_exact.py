@@ -154,6 +154,22 @@ def test_no_leaks_through_shared_edges_and_vertices(device, rng, light, record_p
     assert leaks["watertight"] == 0
 
 
+@pytest.mark.parametrize("subdivisions", [0, 1])
+def test_no_leaks_on_coarse_spheres(device, rng, subdivisions):
+    """Coarse meshes: aimed receivers stay inside the solid (the step behind a grazing vertex of an
+    icosahedron would leave it) and every one of them is shadowed."""
+    mesh = icosphere(subdivisions)
+    vertices = mesh.vertices.astype(np.float64)
+    a, b, c = (vertices[mesh.faces[:, k]] for k in range(3))
+    normals = np.cross(b - a, c - a)
+    for position in ([0.3, 3.0, 0.7], [0.05, 1.3, 0.1], [2.0, 2.0, -1.0]):
+        points = aimed_receivers(mesh, None, 4, rng, np.array(position))
+        assert len(points) > 0
+        assert np.all(np.einsum("fk,pfk->pf", normals, points[:, None] - a[None]) < 0)
+        mask, _ = classify(mesh, sc.PointLight(position), points, eps=1e-6, device=device)
+        assert mask.all()
+
+
 def test_no_leaks_on_exact_ties(device):
     """A box whose top is a grid of integer squares, lit straight down: receivers exactly under grid
     lines and grid points make edge functions exactly zero (the tie rule: hit on both sides)."""
