@@ -21,7 +21,6 @@ Writes OUT/angular.json, angular.md and angular.png. Timings share 2 cores with 
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import sys
 import time
@@ -32,6 +31,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import receivers as rx  # noqa: E402
+from report import save  # noqa: E402
 
 import shadowcl as sc  # noqa: E402
 from shadowcl.methods import create_method, default_eps  # noqa: E402
@@ -378,11 +378,7 @@ def main(argv=None) -> None:
     doc["lookup_rate"] = dict(receivers_per_s=cfg["scale_receivers"] / big["lookup_s"], us_per_lookup=big["us_per_lookup"],
                               paper_us_per_lookup=10.0, cubes=big["cubes"])
     stem = args.stem or ("angular-quick" if args.quick else "angular")
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / f"{stem}.json").write_text(json.dumps(doc, indent=1, default=float))
-    (args.out / f"{stem}.md").write_text(markdown(doc))
-    if not args.quick:
-        plot(doc, args.out / f"{stem}.png")
+    save(args.out, stem, doc, markdown(doc), None if args.quick else plot)
     print(f"wrote {args.out / stem}.{{json,md{',png' if not args.quick else ''}}}")
 
 

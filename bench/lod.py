@@ -19,7 +19,6 @@ Writes OUT/lod.json, lod.md and lod.png (error and time against triangles).
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import time
 from datetime import datetime, timezone
@@ -28,7 +27,8 @@ from pathlib import Path
 import numpy as np
 
 import receivers as rx
-from run import machine, to_json
+from report import save
+from run import machine
 import shadowcl as sc
 from shadowcl import get_device
 from shadowcl import lod
@@ -211,12 +211,9 @@ def main(argv=None) -> dict:
                         "fractions": list(lod.DEFAULT_FRACTIONS), "keep_component": lod.KEEP_COMPONENT,
                         "max_error": MAX_ERROR, "timing": f"median of {repeats} after a cold run and a warm-up"},
            "scenes": [measure_scene(device, name, counts, path_lights, repeats, args.seed) for name in scenes]}
-    args.out.mkdir(parents=True, exist_ok=True)
     stem = "lod-quick" if args.quick else "lod"
-    (args.out / f"{stem}.json").write_text(json.dumps(doc, indent=1, default=to_json))
-    plot(doc, args.out / f"{stem}.png")
     text = markdown(doc, f"{stem}.png")
-    (args.out / f"{stem}.md").write_text(text)
+    save(args.out, stem, doc, text, plot)
     print(text)
     return doc
 

@@ -3,8 +3,25 @@
 from __future__ import annotations
 
 import itertools
+import json
+from pathlib import Path
 
 from peers import PEER
+
+def to_json(value):
+    """JSON encoder fallback for NumPy scalars and arrays in method statistics."""
+    return value.tolist() if hasattr(value, "tolist") else str(value)
+
+
+def save(folder: Path, stem: str, doc: dict, text: str, plot=None) -> None:
+    """Write ``stem``.json (the results document), ``stem``.md (``text``) and, given ``plot(doc, path)``,
+    ``stem``.png into ``folder``: every bench's results in the same three files."""
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / f"{stem}.json").write_text(json.dumps(doc, indent=1, default=to_json))
+    (folder / f"{stem}.md").write_text(text)
+    if plot is not None:
+        plot(doc, folder / f"{stem}.png")
+
 
 AGREEMENT_BAR = 2e-5  # issue 3: exact and Embree differ on at most this fraction of receivers
 THROUGHPUT_BAR = 0.5  # issue 3: exact's throughput (prepare included) at least this times Embree's

@@ -322,11 +322,6 @@ def run_bench(scenes, sweep: dict, counts: dict, repeats: int = 5, seed: int = 0
     }
 
 
-def to_json(value):
-    """JSON encoder fallback for NumPy scalars and arrays in method statistics."""
-    return value.tolist() if hasattr(value, "tolist") else str(value)
-
-
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description="Speed against error of shadowcl's methods, Embree as peer.")
     parser.add_argument("--quick", action="store_true",
@@ -352,11 +347,8 @@ def main(argv=None) -> None:
                     counts, repeats, args.seed)
     doc["settings"]["quick"] = args.quick
     stem = ("quick-" if args.quick else "run-") + datetime.now().strftime("%Y%m%d-%H%M%S")
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / f"{stem}.json").write_text(json.dumps(doc, indent=1, default=to_json))
     table = report.markdown(doc, plot_name=f"{stem}.png")
-    (args.out / f"{stem}.md").write_text(table)
-    report.plot(doc, args.out / f"{stem}.png")
+    report.save(args.out, stem, doc, table, report.plot)
     print(table)
     if args.compare:
         print(report.compare(doc, json.loads(args.compare.read_text())))

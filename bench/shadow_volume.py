@@ -28,7 +28,6 @@ Writes OUT/shadow_volume.{json,md} (``shadow_volume-quick`` with ``--quick``).
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import sys
 import time
@@ -38,7 +37,8 @@ from pathlib import Path
 import numpy as np
 
 import receivers as rx
-from run import machine, to_json
+from report import save
+from run import machine
 import shadowcl as sc
 from shadowcl import get_device, raster
 from shadowcl.methods import create_method, default_eps
@@ -222,9 +222,8 @@ def main(argv=None) -> dict:
     stem = "shadow_volume-quick" if args.quick else "shadow_volume"
     for name in scenes:                    # written after every scene: an interrupted run keeps its part
         doc["rows"] += measure_scene(device, name, counts, repeats, args.seed, progress)
-        (args.out / f"{stem}.json").write_text(json.dumps(doc, indent=1, default=to_json))
         text = markdown(doc)
-        (args.out / f"{stem}.md").write_text(text)
+        save(args.out, stem, doc, text)
     print(text)
     return doc
 

@@ -33,7 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
-from run import machine, to_json
+from report import to_json
+from run import machine
 import shadowcl as sc
 from shadowcl import get_device, raster
 from shadowcl.methods import create_method, default_eps

@@ -47,7 +47,8 @@ import numpy as np
 
 import receivers as rx
 from lod import light_path
-from run import machine, to_json
+from report import save
+from run import machine
 import shadowcl as sc
 from shadowcl import get_device, lod, raster
 from shadowcl.methods import create_method, default_eps, method_class
@@ -376,10 +377,8 @@ def main(argv=None) -> dict:
     for name in scenes:                     # written after every scene: a long run interrupted keeps its part
         doc["scenes"].append(measure_scene(device, name, settings["frames"], settings["repeats"],
                                            (settings["width"], settings["height"]), settings["error_every"], progress))
-        (args.out / f"{stem}.json").write_text(json.dumps(doc, indent=1, default=to_json))
-        plot(doc, args.out / f"{stem}.png")
         text = markdown(doc, f"{stem}.png")
-        (args.out / f"{stem}.md").write_text(text)
+        save(args.out, stem, doc, text, plot)
     print(text)
     return doc
 

@@ -30,7 +30,6 @@ Writes OUT/voxel.json, voxel.md, voxel.png. Timings share 2 cores with other wor
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import sys
 import time
@@ -41,6 +40,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import receivers as rx  # noqa: E402
+from report import save  # noqa: E402
 
 import shadowcl as sc  # noqa: E402
 from shadowcl.methods import create_method, default_eps  # noqa: E402
@@ -340,11 +340,8 @@ def main(argv=None) -> dict:
                note="2 cores shared with other work: timings are noisy; medians of repeats after a warm-up "
                     "(512 and 1024: one run after the warm-up).", config=cfg,
                figure1=figure1(device, cfg), scenes=[measure_scene(device, name, cfg) for name in cfg["scenes"]])
-    args.out.mkdir(parents=True, exist_ok=True)
     stem = "voxel_quick" if args.quick else "voxel"
-    (args.out / f"{stem}.json").write_text(json.dumps(doc, indent=1))
-    (args.out / f"{stem}.md").write_text(markdown(doc))
-    plot(doc, args.out / f"{stem}.png")
+    save(args.out, stem, doc, markdown(doc), plot)
     return doc
 
 

@@ -123,7 +123,7 @@ def test_harness_rows_reports_and_compare(scene, device, tmp_path):
         assert row["device_mib"] == 1.0 and row["host_peak_mib"] is not None
     assert rows[2]["vs_peer"] == 1.0 and rows[2]["wrong"] <= 2
     assert all(r["total_s"] > 0 and len(r["classify_runs_s"]) == 2 for r in rows)
-    doc = json.loads(json.dumps(doc, default=run.to_json))
+    doc = json.loads(json.dumps(doc, default=report.to_json))
     table = report.markdown(doc, plot_name="plot.png")
     assert table.count("| cube | 0 |") == 3 and "![speed against error](plot.png)" in table
     report.plot(doc, tmp_path / "plot.png")
