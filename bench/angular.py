@@ -6,7 +6,7 @@
    scenes, the angular method with both tables (``table="faces"``: a span per lit face and row;
    ``"loops"``: the paper's ridge-edge loop pairs) at 100, 300 and 600 rows and at the receivers' own
    limit (eq. 4, the default), side by side with exact (the ground truth) and shadow_map in the same run; the median of
-   repeats after a warm-up, prepare + classify. Time ratio at equal error: against the cheapest
+   repeats after a warm-up (timing.py), sc.prepare + Shadows.mask. Time ratio at equal error: against the cheapest
    shadow_map setting at least as accurate.
 2. Render (both tables): the camera's view at its own limit (rows per scan line, the default), error against exact,
    and the scan-line runs (one lookup per run) against one lookup per pixel: lookups and time.
@@ -21,9 +21,7 @@ Writes OUT/angular.json, angular.md and angular.png. Timings share 2 cores with 
 from __future__ import annotations
 
 import argparse
-import statistics
 import sys
-import time
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -32,6 +30,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import receivers as rx  # noqa: E402
 from report import save  # noqa: E402
+from run import public_steps  # noqa: E402
+from timing import interleaved, timed, timed_steps  # noqa: E402
 
 import shadowcl as sc  # noqa: E402
 from shadowcl.methods import create_method, default_eps  # noqa: E402
@@ -51,20 +51,13 @@ FULL = dict(ground=400_000, model=100_000, repeats=3, cubes=[1, 10, 100, 1000, 1
 QUICK = dict(ground=8_000, model=2_000, repeats=1, cubes=[1, 10, 100], render=(160, 90), scale_receivers=10_000)
 
 
-def timed(method, params, mesh, light, points, normals, eps, repeats, device):
-    """(prepare s, classify s, mask, stats): a warm-up, then the median of ``repeats`` runs."""
-    runs = []
-    for _ in range(repeats + 1):
-        instance = create_method(method, device, **params)
-        start = time.perf_counter()
-        instance.prepare(mesh, light, np.stack([points.min(0), points.max(0)]), eps)
-        device.queue.finish()
-        mid = time.perf_counter()
-        mask = instance.classify(points, normals)
-        runs.append((mid - start, time.perf_counter() - mid))
-    runs = runs[1:]
-    stats = dict(getattr(instance, "stats", {}) or {})
-    return (statistics.median(r[0] for r in runs), statistics.median(r[1] for r in runs), mask,
+def timed_method(method, params, mesh, light, points, normals, eps, repeats, device):
+    """(prepare s, query s, mask, stats) through the public calls (``sc.prepare``, ``Shadows.mask``): a
+    warm-up, then the median of ``repeats`` runs."""
+    box = np.stack([points.min(0), points.max(0)])
+    steps = timed_steps(public_steps(mesh, light, method, box, points, normals, device, eps, **params), repeats)
+    stats = steps["prepare"].result.stats
+    return (steps["prepare"].median, steps["query"].median, steps["query"].result,
             {k: v for k, v in stats.items() if isinstance(v, (int, float, bool, str))})
 
 
@@ -83,14 +76,14 @@ def speed_error(cfg, device, quick: bool) -> list[dict]:
             points, normals = rx.receivers(scene, (cfg["ground"] + cfg["model"]) // 4, 0)
         eps = default_eps(scene.mesh.bounds)
         light = scene.lights[0]
-        p, c, truth, _ = timed("exact", {}, scene.mesh, light, points, normals, eps, cfg["repeats"], device)
+        p, c, truth, _ = timed_method("exact", {}, scene.mesh, light, points, normals, eps, cfg["repeats"], device)
         rows.append(dict(scene=scene.name, method="exact", params="", prepare_s=p, classify_s=c, error=0.0,
                          receivers=len(points), triangles=len(scene.mesh.faces)))
         settings = [("shadow_map", {"resolution": r}) for r in SHADOW_MAP] + \
                    [("angular", {"theta_resolution": r, "expected_receivers": len(points), "table": t})
                     for t in TABLES for r in ROWS]
         for method, params in settings:
-            p, c, mask, stats = timed(method, params, scene.mesh, light, points, normals, eps, cfg["repeats"], device)
+            p, c, mask, stats = timed_method(method, params, scene.mesh, light, points, normals, eps, cfg["repeats"], device)
             err = mask_error(mask, truth)
             row = dict(scene=scene.name, method=method, params=_label(params), prepare_s=p, classify_s=c,
                        error=err.fraction, false_shadow=err.false_shadow, false_light=err.false_light,
@@ -146,18 +139,13 @@ def _render_row(cfg, device, scene, name, exact, table: str) -> dict:
     method = create_method("angular", device, expected_receivers=len(seen.points), table=table)
     method.prepare(scene.mesh, scene.lights[0], scene.bounds, default_eps(scene.bounds))
     method.classify_view(view, None, seen)
+    # the method's own lookups, reached inside on purpose: render's scan-line path has no public call
     line = seen.pixel_index // width
-    times = {True: [], False: []}
-    for _ in range(cfg["repeats"] + 1):
-        for runs in (True, False):
-            start = time.perf_counter()
-            if runs:
-                method.classify_lines(seen.points, seen.normals, line, height)
-                lookups = method.stats["lookups"]
-            else:
-                method.classify(seen.points, seen.normals)
-            times[runs].append(time.perf_counter() - start)
-    t_runs, t_pixels = (statistics.median(times[r][1:]) for r in (True, False))
+    both = interleaved({"runs": lambda: method.classify_lines(seen.points, seen.normals, line, height),
+                        "pixels": lambda: method.classify(seen.points, seen.normals)}, cfg["repeats"])
+    t_runs, t_pixels = both["runs"].median, both["pixels"].median
+    method.classify_lines(seen.points, seen.normals, line, height)
+    lookups = method.stats["lookups"]
     row = dict(scene=Path(str(name)).stem, table=table, size=f"{width}x{height}",
                pixels=len(seen.points), rows=method.stats["rows"], error=err.fraction,
                identical=bool(np.array_equal(runs_report.shadow, pixel_report.shadow)),
@@ -178,14 +166,12 @@ def several_lights(cfg, device) -> dict:
     eps = default_eps(scene.mesh.bounds)
     out = {}
     for name, lights in (("one", [first]), ("two", [first, second])):
-        times = []
-        for _ in range(cfg["repeats"] + 1):
-            start = time.perf_counter()
-            counts = shadow_counts(scene.mesh, lights, points, normals, device=device, eps=eps)
-            times.append(time.perf_counter() - start)
+        counted = timed(lambda: shadow_counts(scene.mesh, lights, points, normals, device=device, eps=eps),
+                             cfg["repeats"])
+        counts = counted.result
         truth = sum(sc.shadow_mask(scene.mesh, light, points, normals, eps=eps, device=device).astype(np.int32)
                     for light in lights)
-        out[name] = dict(lights=len(lights), seconds=statistics.median(times[1:]), wrong=float(np.mean(counts != truth)))
+        out[name] = dict(lights=len(lights), seconds=counted.median, wrong=float(np.mean(counts != truth)))
     out["time_ratio"] = out["two"]["seconds"] / out["one"]["seconds"]
     print(f"lights: one {out['one']['seconds']:.4f} s, two {out['two']['seconds']:.4f} s, ratio {out['time_ratio']:.2f}, "
           f"wrong counts {out['two']['wrong']:.5f}")
@@ -216,9 +202,9 @@ def scalability(cfg, device) -> dict:
     for n in cfg["cubes"]:
         mesh = cubes_scene(n, rng)
         eps = default_eps(mesh.bounds)
-        pe, ce, truth, _ = timed("exact", {}, mesh, light, points, normals, eps, cfg["repeats"], device)
+        pe, ce, truth, _ = timed_method("exact", {}, mesh, light, points, normals, eps, cfg["repeats"], device)
         for table in TABLES:
-            p, c, mask, stats = timed("angular", {"theta_resolution": 600, "table": table}, mesh, light, points,
+            p, c, mask, stats = timed_method("angular", {"theta_resolution": 600, "table": table}, mesh, light, points,
                                       normals, eps, cfg["repeats"], device)
             row = dict(cubes=n, table=table, triangles=len(mesh.faces), build_s=p, lookup_s=c,
                        table_bytes=stats["table_bytes"], entries=stats["entries"], max_row=stats["max_row"],

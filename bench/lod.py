@@ -19,8 +19,6 @@ Writes OUT/lod.json, lod.md and lod.png (error and time against triangles).
 from __future__ import annotations
 
 import argparse
-import statistics
-import time
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -28,11 +26,12 @@ import numpy as np
 
 import receivers as rx
 from report import save
-from run import machine
+from run import machine, public_steps
+from timing import clock, timed_steps
 import shadowcl as sc
 from shadowcl import get_device
 from shadowcl import lod
-from shadowcl.methods import create_method, default_eps
+from shadowcl.methods import default_eps
 
 RESULTS = Path(__file__).resolve().parent / "results"
 FULL = {"ground": 1_000_000, "model": 200_000}
@@ -53,27 +52,18 @@ def light_path(scene: rx.BenchScene, frames: int) -> list:
 
 
 def exact_time(device, occluder, light, points, normals, box, eps, repeats: int) -> dict:
-    """The exact method with ``occluder``: one cold run, one warm-up, then the median of ``repeats``."""
-    method = create_method("exact", device, expected_receivers=len(points))
-    runs = []
-    for _ in range(repeats + 2):
-        start = time.perf_counter()
-        method.prepare(occluder, light, box, eps)
-        device.queue.finish()
-        prepared = time.perf_counter()
-        method.classify(points, normals)
-        runs.append((prepared - start, time.perf_counter() - prepared))
-    runs = runs[2:]
-    return {"prepare_s": statistics.median(p for p, _ in runs), "classify_s": statistics.median(c for _, c in runs),
-            "exact_s": statistics.median(p + c for p, c in runs)}
+    """The exact method with ``occluder`` through the public calls: a cold run and a warm-up, then the
+    median of ``repeats``."""
+    steps = timed_steps(public_steps(occluder, light, "exact", box, points, normals, device, eps,
+                                     expected_receivers=len(points)), repeats, warmup=2)
+    return {"prepare_s": steps["prepare"].median, "classify_s": steps["query"].median,
+            "exact_s": steps["total"].median}
 
 
 def measure_scene(device, name: str, counts: dict, path_lights: int, repeats: int, seed: int) -> dict:
     scene = rx.load_scene(name)
     mesh = scene.mesh
-    start = time.perf_counter()
-    meshes = lod.levels(mesh)
-    levels_s = time.perf_counter() - start
+    levels_s, meshes = clock(lambda: lod.levels(mesh))
     simplify_s = lod.level_times(mesh)
     ground = len(mesh.faces) - len(scene.model.faces)
     points, normals = rx.receivers(scene, counts["ground"], counts["model"], seed)

@@ -3,9 +3,12 @@
     python bench/run.py [--quick] [--scenes bunny ogre] [--methods exact embreex] [--repeats 5]
                         [--out bench/results] [--compare OLD.json]
 
-For each scene, light, method and parameter setting (:data:`SWEEP`): one cold run whose mask is
-checked against the ground truth, one warm-up on a fresh instance (also the memory measurement),
-then the median of ``repeats`` timed runs of ``prepare`` and ``classify``. Writes
+For each scene, light, method and parameter setting (:data:`SWEEP`), a shadowcl method is measured
+through the public calls a user makes: a cold ``sc.shadow_mask`` whose mask is checked against the
+ground truth (``sc.shadow_mask(..., method="exact")``), one warm-up (also the memory measurement),
+the median of ``repeats`` one-shot calls, then ``sc.prepare`` and ``Shadows.mask`` timed apart, and
+the one-shot call's host share (:func:`host_share`). A peer (Embree) keeps its own ``prepare`` /
+``classify`` protocol. Timing statistics come from ``timing.py``, shared by every bench. Writes
 ``OUT/STEM.json`` (machine, settings, one row per setting), ``STEM.md`` (table) and ``STEM.png``
 (speed against error).
 """
@@ -13,17 +16,17 @@ then the median of ``repeats`` timed runs of ``prepare`` and ``classify``. Write
 from __future__ import annotations
 
 import argparse
+import cProfile
 import ctypes
 import gc
 import itertools
 import json
 import os
 import platform
+import pstats
 import re
 import resource
-import statistics
 import sys
-import time
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, is_dataclass
 from functools import cached_property
@@ -32,13 +35,15 @@ from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
 import numpy as np
+import pyopencl as cl
 from tqdm import tqdm
 
 import receivers as rx
 import report
 from peers import PEER, PEERS
-from shadowcl import get_device
-from shadowcl.methods import create_method, default_eps, method_class
+import shadowcl as sc
+from shadowcl.methods import default_eps, method_class, with_receiver_count
+from timing import Timing, clock, timed
 from shadowcl.metrics import mask_error
 
 # Method name -> {parameter: [values]}; every combination is one row. Peers (peers.PEERS) take part
@@ -90,11 +95,9 @@ def label(method: str, params: dict) -> str:
     return " ".join([method] + [f"{k}={v}" for k, v in params.items()])
 
 
-def make(name: str, params: dict, device, peers: dict = PEERS):
-    """An unprepared instance of ``name`` with ``params``: ``peers[name]`` (a class) or a shadowcl method."""
-    if name in peers:
-        return peers[name](**params)
-    return create_method(name, device, **params)
+def make_peer(name: str, params: dict, peers: dict = PEERS):
+    """An unprepared instance of peer ``name`` (a class of ``peers``) with ``params``."""
+    return peers[name](**params)
 
 
 def close(instance) -> None:
@@ -114,24 +117,55 @@ def available(name: str, peers: dict = PEERS) -> str | None:
     return None
 
 
-def ground_truth() -> tuple[str, dict, str]:
+def ground_truth() -> tuple[str, str]:
     """The method whose mask is the truth: ``exact`` once it imports, else Embree; and why."""
     problem = available("exact")
     if problem is None:
-        return "exact", {}, "exact method (shadowcl.exact, default parameters)"
+        return "exact", "exact method (sc.shadow_mask(..., method='exact'), default parameters)"
     if available(PEER) is not None:
         raise RuntimeError(f"no ground truth: the exact method is not available ({problem}) and neither is embreex")
-    return PEER, {}, f"embreex (shadowcl.exact is not available yet: {problem})"
+    return PEER, f"embreex (shadowcl.exact is not available yet: {problem})"
 
 
-def timed_run(instance, case: Case, device) -> tuple[float, float, np.ndarray]:
-    """Seconds spent in ``prepare`` (device queue drained) and in ``classify``, and the mask."""
-    start = time.perf_counter()
-    instance.prepare(case.scene.mesh, case.light, case.receiver_bounds, case.eps)
-    device.queue.finish()
-    prepared = time.perf_counter()
-    mask = instance.classify(case.points, case.normals)
-    return prepared - start, time.perf_counter() - prepared, mask
+# The public calls, exactly as a user makes them: nothing precomputed but the receivers and eps.
+def one_shot(case: Case, method: str, params: dict, device) -> np.ndarray:
+    return sc.shadow_mask(case.scene.mesh, case.light, case.points, case.normals, method=method, device=device,
+                          eps=case.eps, **params)
+
+
+def prepared(case: Case, method: str, params: dict, device) -> sc.Shadows:
+    # A user who prepares for a known number of receivers says so (the method's expected_receivers), as
+    # the one-shot call does for itself: the same grid, so prepare + query is comparable with one-shot.
+    params = with_receiver_count(method, params, len(case.points))
+    return sc.prepare(case.scene.mesh, case.light, method, bounds=case.receiver_bounds, device=device,
+                      eps=case.eps, **params)
+
+
+def public_steps(occluders, light, method: str, bounds, points, normals=None, device=None, eps=None,
+                 **params) -> dict:
+    """The steps of a user's prepare-once call for ``timing.timed_steps``: ``sc.prepare`` fitted to
+    ``bounds``, then ``Shadows.mask``. The per-paper benches time methods through it."""
+    params = with_receiver_count(method, params, len(points))
+    return {"prepare": lambda _: sc.prepare(occluders, light, method, bounds=bounds, device=device, eps=eps, **params),
+            "query": lambda shadows: shadows.mask(points, normals)}
+
+
+def peer_run(instance, case: Case, stages: list) -> np.ndarray:
+    """The peer's own protocol: ``prepare`` then ``classify``; appends their seconds to ``stages``."""
+    prepare_s, _ = clock(lambda: instance.prepare(case.scene.mesh, case.light, case.receiver_bounds, case.eps))
+    classify_s, mask = clock(lambda: instance.classify(case.points, case.normals))
+    stages.append((prepare_s, classify_s))
+    return mask
+
+
+def truth_mask(case: Case, name: str, device) -> np.ndarray:
+    if name != PEER:
+        return one_shot(case, name, {}, device)
+    instance = make_peer(name, {})
+    try:
+        return peer_run(instance, case, [])
+    finally:
+        close(instance)
 
 
 def _status_kib(field: str) -> int:
@@ -163,38 +197,114 @@ def peak_rss(result: dict):
     result["host_peak_mib"] = max(read() - base, 0) / 1024
 
 
+# cProfile sees pyopencl's Python wrappers (enqueue_copy, the kernel invokers) but not nanobind's C
+# functions called from shadowcl's own code: queue.finish() and Buffer construction. These wrappers give
+# them a Python frame of their own while the host share is measured.
+_FINISH, _BUFFER = cl.CommandQueue.finish, cl.Buffer
+
+
+def _finish(queue):
+    return _FINISH(queue)
+
+
+def _buffer(*args, **kwargs):
+    return _BUFFER(*args, **kwargs)
+
+
+_WRAPPERS = {(f.__code__.co_filename, f.__code__.co_firstlineno, f.__code__.co_name) for f in (_finish, _buffer)}
+
+
+def host_share(call) -> dict:
+    """How much of one ``call``'s wall time is spent outside OpenCL calls, by cProfile.
+
+    OpenCL time ("device and driver") is the ``tottime`` of every function of pyopencl (its Python
+    wrappers and the generated kernel invokers, whose own time is the C call they make: enqueue, copy,
+    wait, build) and of :data:`_WRAPPERS`; host = wall - that. The profiler's own overhead lands in
+    host time, so the share is an upper bound.
+    """
+    profile = cProfile.Profile()
+    cl.CommandQueue.finish, cl.Buffer = _finish, _buffer
+    try:
+        wall, _ = clock(lambda: profile.runcall(call))
+    finally:
+        cl.CommandQueue.finish, cl.Buffer = _FINISH, _BUFFER
+    opencl = sum(tottime for key, (_, _, tottime, _, _) in pstats.Stats(profile).stats.items()
+                 if "pyopencl" in key[0] or key in _WRAPPERS)
+    return {"host_s": wall - opencl, "host_share": (wall - opencl) / wall, "host_profiled_wall_s": wall}
+
+
 def method_stats(instance) -> dict | None:
-    """What a method reports about its last run (attribute ``stats``: a dict or a dataclass)."""
+    """What a peer reports about its last run (attribute ``stats``: a dict or a dataclass)."""
     stats = getattr(instance, "stats", None)
     if is_dataclass(stats):
         return asdict(stats)
     return dict(stats) if stats else None
 
 
-def measure(case: Case, method: str, params: dict, truth: np.ndarray, repeats: int, device,
-            peers: dict = PEERS) -> dict:
-    """One row: correctness on a cold run, a warm-up with memory, then the median of ``repeats`` runs."""
-    instance = make(method, params, device, peers)
+def check_mask(mask, truth: np.ndarray, what: str) -> None:
+    if not (isinstance(mask, np.ndarray) and mask.dtype == bool and mask.shape == truth.shape):
+        raise TypeError(f"{what} returned {type(mask).__name__} {getattr(mask, 'dtype', '')} "
+                        f"{getattr(mask, 'shape', '')}, expected bool {truth.shape}")
+
+
+def measure_method(case: Case, method: str, params: dict, truth: np.ndarray, repeats: int, device) -> dict:
+    """A shadowcl method through the public calls: the one-shot ``sc.shadow_mask`` (cold run checked
+    against the truth, a warm-up that measures memory, ``repeats`` timed), then ``sc.prepare`` and
+    ``Shadows.mask`` timed apart; the one-shot call's host share."""
+    what = f"sc.shadow_mask(method={method!r}, {params})"
+    cold_s, mask = clock(lambda: one_shot(case, method, params, device))
+    check_mask(mask, truth, what)
+    row = {"memory_method": None, "host_peak_mib": None}
+    with peak_rss(row):
+        one_shot(case, method, params, device)
+    oneshot = timed(lambda: one_shot(case, method, params, device), repeats, warmup=0)
+    prepare = timed(lambda: prepared(case, method, params, device), repeats)
+    shadows = prepare.result
+    query = timed(lambda: shadows.mask(case.points, case.normals), repeats)
+    check_mask(query.result, truth, f"sc.prepare(method={method!r}, {params}).mask")
+    row.update(host_share(lambda: one_shot(case, method, params, device)))
+    stats = shadows.stats
+    return {"oneshot": oneshot, "prepare": prepare, "query": query, "cold_s": cold_s, "mask": mask,
+            "prepared_wrong": int(np.count_nonzero(query.result != truth)), "resolved_params": shadows.params,
+            "stats": stats, "device_bytes": stats["device_bytes"], **row}
+
+
+def measure_peer(case: Case, name: str, params: dict, truth: np.ndarray, repeats: int, peers: dict) -> dict:
+    """A peer by its own protocol: cold ``prepare`` + ``classify`` checked, a warm-up that measures memory,
+    then ``repeats`` timed runs; its one-shot time is prepare + classify."""
+    cold = []
+    instance = make_peer(name, params, peers)
     try:
-        prepare_cold, classify_cold, mask = timed_run(instance, case, device)
+        mask = peer_run(instance, case, cold)
     finally:
         close(instance)
-    if not (isinstance(mask, np.ndarray) and mask.dtype == bool and mask.shape == truth.shape):
-        raise TypeError(f"{label(method, params)}: classify returned {type(mask).__name__} "
-                        f"{getattr(mask, 'dtype', '')} {getattr(mask, 'shape', '')}, expected bool {truth.shape}")
-    error = mask_error(mask, truth)
-    row = {"memory_method": None, "host_peak_mib": None}
-    instance = make(method, params, device, peers)
+    check_mask(mask, truth, f"{name} {params}: classify")
+    row, stages = {"memory_method": None, "host_peak_mib": None}, []
+    instance = make_peer(name, params, peers)
     try:
         with peak_rss(row):
-            timed_run(instance, case, device)
-        runs = [timed_run(instance, case, device)[:2] for _ in range(repeats)]
+            peer_run(instance, case, [])
+        for _ in range(repeats):
+            peer_run(instance, case, stages)
         stats = method_stats(instance)
     finally:
         close(instance)
-    prepare = [p for p, _ in runs]
-    classify = [c for _, c in runs]
-    total = statistics.median(p + c for p, c in runs)
+    return {"oneshot": Timing([p + c for p, c in stages]), "prepare": Timing([p for p, _ in stages]),
+            "query": Timing([c for _, c in stages]), "cold_s": sum(cold[0]), "mask": mask,
+            "prepared_wrong": None, "resolved_params": None, "stats": stats,
+            "device_bytes": (stats or {}).get("device_bytes"), "host_s": None, "host_share": None,
+            "host_profiled_wall_s": None, **row}
+
+
+def measure(case: Case, method: str, params: dict, truth: np.ndarray, repeats: int, device,
+            peers: dict = PEERS) -> dict:
+    """One row of the results document (see bench/README.md)."""
+    if method in peers:
+        m = measure_peer(case, method, params, truth, repeats, peers)
+    else:
+        m = measure_method(case, method, params, truth, repeats, device)
+    error = mask_error(m["mask"], truth)
+    oneshot, prepare, query = m["oneshot"], m["prepare"], m["query"]
     n = len(case.points)
     return {
         "scene": case.scene.name,
@@ -204,29 +314,35 @@ def measure(case: Case, method: str, params: dict, truth: np.ndarray, repeats: i
         "label": label(method, params),
         "receivers": n,
         "triangles": len(case.scene.mesh.faces),
-        "prepare_s": statistics.median(prepare),
-        "classify_s": statistics.median(classify),
-        "total_s": total,
-        "prepare_cold_s": prepare_cold,
-        "classify_cold_s": classify_cold,
-        "prepare_runs_s": prepare,
-        "classify_runs_s": classify,
-        "receivers_per_s": n / total,
-        "receivers_per_s_classify": n / statistics.median(classify),
+        "oneshot_s": oneshot.median,
+        "prepare_s": prepare.median,
+        "query_s": query.median,
+        "oneshot_cold_s": m["cold_s"],
+        "oneshot_runs_s": oneshot.runs,
+        "prepare_runs_s": prepare.runs,
+        "query_runs_s": query.runs,
+        "receivers_per_s": n / oneshot.median,
+        "receivers_per_s_query": n / query.median,
         "false_shadow": error.false_shadow,
         "false_light": error.false_light,
         "wrong": error.wrong,
         "error_percent": 100 * error.fraction,
+        "prepared_wrong": m["prepared_wrong"],
         "in_shadow": int(truth.sum()),
         "vs_peer": None,
-        **row,
-        "device_mib": stats["device_bytes"] / 2**20 if stats and "device_bytes" in stats else None,
-        "method_stats": stats,
+        "host_s": m["host_s"],
+        "host_share": m["host_share"],
+        "host_profiled_wall_s": m["host_profiled_wall_s"],
+        "memory_method": m["memory_method"],
+        "host_peak_mib": m["host_peak_mib"],
+        "device_mib": m["device_bytes"] / 2**20 if m["device_bytes"] is not None else None,
+        "resolved_params": m["resolved_params"],
+        "method_stats": m["stats"],
     }
 
 
 def add_peer_ratios(rows: list[dict]) -> None:
-    """``vs_peer``: each row's throughput (prepare included) over the fastest Embree row of its case."""
+    """``vs_peer``: each row's one-shot throughput over the fastest Embree row's (prepare + classify) of its case."""
     for _, group in itertools.groupby(rows, key=lambda r: (r["scene"], r["light"])):
         group = list(group)
         peers = [r["receivers_per_s"] for r in group if r["method"] == PEER]
@@ -274,8 +390,8 @@ def run_bench(scenes, sweep: dict, counts: dict, repeats: int = 5, seed: int = 0
     the method protocol that are not shadowcl methods (tests add stand-ins). The truth is
     :func:`ground_truth`'s method.
     """
-    device = get_device(device)
-    truth_name, truth_params, truth_note = ground_truth()
+    device = sc.get_device(device)
+    truth_name, truth_note = ground_truth()
     skipped = {name: why for name in sweep if (why := available(name, peers)) is not None}
     jobs = [(name, params) for name, grid in sweep.items() if name not in skipped for params in settings(grid)]
     cases = []
@@ -284,14 +400,11 @@ def run_bench(scenes, sweep: dict, counts: dict, repeats: int = 5, seed: int = 0
         eps = default_eps(scene.mesh.bounds)
         cases += [Case(scene, i, points, normals, eps) for i in range(len(scene.lights))]
     rows, notes, failed = [], [], []
+    load_start = os.getloadavg()  # the 2 cores are shared: a busy machine shows here
     bar = tqdm(total=len(cases) * (len(jobs) + 1), disable=not progress, unit="run")
     for case in cases:
         bar.set_description(f"{case.scene.name} truth")
-        truth_instance = make(truth_name, truth_params, device)
-        try:
-            truth = timed_run(truth_instance, case, device)[2]
-        finally:
-            close(truth_instance)
+        truth = truth_mask(case, truth_name, device)
         bar.update()
         notes.append(f"{case.scene.name} light {case.light_index}: {describe_light(case.light)}; "
                      f"{len(case.points)} receivers, {len(case.scene.mesh.faces)} triangles, eps {case.eps:.3g}, "
@@ -312,8 +425,11 @@ def run_bench(scenes, sweep: dict, counts: dict, repeats: int = 5, seed: int = 0
         "machine": machine(device),
         "settings": {"receivers": counts, "seed": seed, "repeats": repeats, "sweep": sweep,
                      "truth": truth_note, "truth_method": truth_name, "skipped": skipped,
-                     "timing": "median of repeats after one cold run and one warm-up; "
-                               "prepare ends with the device queue drained",
+                     "timing": "public calls, median of repeats after a cold run (checked) and a warm-up: "
+                               "one-shot sc.shadow_mask; sc.prepare (ends with the device queue drained) and "
+                               ".mask timed apart; a peer's one-shot time is its prepare + classify; host share: "
+                               "one one-shot call under cProfile, wall minus the tottime of pyopencl's calls",
+                     "load_average": {"start": load_start, "end": os.getloadavg()},
                      "peer": "embreex run(): tnear emulated by starting rays eps along their direction; "
                              "workers = processes"},
         "cases": notes,

@@ -18,8 +18,10 @@ shadow, false light) and held against issue 6's bar (<= 1e-4 of receivers). For 
 differing pixels are explained: the distance of their segment to the nearest silhouette edge in
 pixel footprints (the stencil decides on the pixel's ray, the exact method at a point up to eps off
 it), and how many of them the float64 reference with eps = 1e-12 (no offset) classifies as the
-stencil does. Timing: one warm-up each, then ``repeats`` rounds, each timing exact then
-shadow_volume (interleaved, so load drift hits both); medians of prepare, classify and their sum;
+stencil does. Timing (``timing.interleaved``): one warm-up round, then ``repeats`` rounds, each timing
+exact then shadow_volume (interleaved, so load drift hits both); medians of prepare, classify and their
+sum. shadow_mask rows go through the public calls (``sc.prepare`` then ``Shadows.mask``); the render
+rows' stencil is the method's ``classify_view``, reached inside (exact there is public too);
 the ratio shadow_volume / exact is the figure to quote: the machine is shared (2 cores, other jobs),
 so absolute times are noisy.
 Writes OUT/shadow_volume.{json,md} (``shadow_volume-quick`` with ``--quick``).
@@ -28,9 +30,7 @@ Writes OUT/shadow_volume.{json,md} (``shadow_volume-quick`` with ``--quick``).
 from __future__ import annotations
 
 import argparse
-import statistics
 import sys
-import time
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -38,7 +38,8 @@ import numpy as np
 
 import receivers as rx
 from report import save
-from run import machine
+from run import machine, public_steps
+from timing import Timing, clock, interleaved
 import shadowcl as sc
 from shadowcl import get_device, raster
 from shadowcl.methods import create_method, default_eps
@@ -55,48 +56,46 @@ BAR = 1e-4              # issue 6: full-resolution shadow volumes differ from ex
 
 
 class Contender:
-    """One method instance and how to run one frame on it: ``prepare`` then ``run`` (classify)."""
+    """How one method runs one frame: ``steps["prepare"](None)`` builds what ``steps["query"]`` asks for
+    its mask (``run.public_steps``' shape). Every frame's (prepare s, query s) is kept in ``stages``,
+    the last prepared object in ``last``."""
 
-    def __init__(self, device, name: str, mesh, light, bounds, eps, run, **params):
-        self.device, self.mesh, self.light, self.bounds, self.eps, self.run = device, mesh, light, bounds, eps, run
-        self.method = create_method(name, device, **params)
-        self.times: list[tuple[float, float]] = []
+    def __init__(self, steps: dict):
+        self.steps = steps
+        self.stages: list[tuple[float, float]] = []
+        self.last = None
 
-    def frame(self, keep: bool = True) -> np.ndarray:
-        start = time.perf_counter()
-        self.method.prepare(self.mesh, self.light, self.bounds, self.eps)
-        self.device.queue.finish()
-        prepared = time.perf_counter()
-        mask = self.run(self.method)
-        self.device.queue.finish()
-        if keep:
-            self.times.append((prepared - start, time.perf_counter() - prepared))
+    def frame(self) -> np.ndarray:
+        prepare_s, prepared = clock(lambda: self.steps["prepare"](None))
+        query_s, mask = clock(lambda: self.steps["query"](prepared))
+        self.stages.append((prepare_s, query_s))
+        self.last = prepared
         return mask
 
-    def medians(self) -> dict:
-        return {"prepare_ms": 1e3 * statistics.median(p for p, _ in self.times),
-                "classify_ms": 1e3 * statistics.median(c for _, c in self.times),
-                "total_ms": 1e3 * statistics.median(p + c for p, c in self.times)}
+    def medians(self, repeats: int) -> dict:
+        """Medians of the last ``repeats`` frames (the timed rounds of :func:`side_by_side`)."""
+        timed = self.stages[-repeats:]
+        return {"prepare_ms": Timing([p for p, _ in timed]).median_ms,
+                "classify_ms": Timing([c for _, c in timed]).median_ms,
+                "total_ms": Timing([p + c for p, c in timed]).median_ms}
 
 
 def side_by_side(exact: Contender, volume: Contender, repeats: int) -> tuple[np.ndarray, np.ndarray]:
-    """Cold masks of both, a warm-up each, then ``repeats`` interleaved timed rounds."""
-    masks = exact.frame(keep=False), volume.frame(keep=False)
-    exact.frame(keep=False), volume.frame(keep=False)
-    for _ in range(repeats):
-        exact.frame(), volume.frame()
+    """Cold masks of both, then a warm-up round and ``repeats`` interleaved timed rounds."""
+    masks = exact.frame(), volume.frame()
+    interleaved({"exact": exact.frame, "volume": volume.frame}, repeats)
     return masks
 
 
-def row(scene: str, path: str, truth: np.ndarray, mask: np.ndarray, exact: Contender, volume: Contender) -> dict:
+def row(scene: str, path: str, truth: np.ndarray, mask: np.ndarray, exact: Contender, volume: Contender,
+        repeats: int, stats: dict) -> dict:
     error = mask_error(mask, truth)
-    e, v = exact.medians(), volume.medians()
-    stats = volume.method.stats
+    e, v = exact.medians(repeats), volume.medians(repeats)
     return {"scene": scene, "path": path, "receivers": int(truth.size), "differ": error.wrong,
             "fraction": error.fraction, "false_shadow": error.false_shadow, "false_light": error.false_light,
             "shadowed": float(truth.mean()), **{f"exact_{k}": x for k, x in e.items()},
             **{f"shadow_volume_{k}": x for k, x in v.items()}, "ratio": v["total_ms"] / e["total_ms"],
-            **{k: stats[k] for k in ("occluder_triangles", "two_sided_triangles", "cap_triangles",
+            **{k: stats.get(k) for k in ("occluder_triangles", "two_sided_triangles", "cap_triangles",
                                      "silhouette_edges", "volume_triangles")}}
 
 
@@ -127,11 +126,11 @@ def measure_scene(device, name: str, counts: dict, repeats: int, seed: int, prog
     points, normals = rx.receivers(bench_scene, counts["ground"], counts["model"], seed)
     box = np.stack([points.min(axis=0), points.max(axis=0)])
     eps = default_eps(mesh.bounds)
-    classify = lambda method: method.classify(points, normals)                       # noqa: E731
-    exact = Contender(device, "exact", mesh, light, box, eps, classify, expected_receivers=len(points))
-    volume = Contender(device, "shadow_volume", mesh, light, box, eps, classify)
+    exact = Contender(public_steps(mesh, light, "exact", box, points, normals, device, eps,
+                                   expected_receivers=len(points)))
+    volume = Contender(public_steps(mesh, light, "shadow_volume", box, points, normals, device, eps))
     truth, mask = side_by_side(exact, volume, repeats)
-    rows.append(row(name, "shadow_mask", truth, mask, exact, volume))
+    rows.append(row(name, "shadow_mask", truth, mask, exact, volume, repeats, volume.last.stats))
 
     scene = sc.Scene.load(PROJECT / "scenes" / "models" / f"{name}.toml")
     width, height = counts["width"], counts["height"]
@@ -140,20 +139,27 @@ def measure_scene(device, name: str, counts: dict, repeats: int, seed: int, prog
     seen = raster.receivers(device, scene.mesh, view, zbuffer)
     eps = default_eps(scene.bounds)
     light = scene.lights[0]
-    exact = Contender(device, "exact", scene.mesh, light, scene.bounds, eps,
-                      lambda method: method.classify(seen.points, seen.normals), expected_receivers=len(seen.points))
+    exact = Contender(public_steps(scene.mesh, light, "exact", scene.bounds, seen.points, seen.normals, device,
+                                   eps, expected_receivers=len(seen.points)))
     for stencil in STENCILS:
         progress(f"{name} render {stencil}")
-        exact.times = []
-        volume = Contender(device, "shadow_volume", scene.mesh, light, scene.bounds, eps,
-                           lambda method: method.classify_view(view, zbuffer, seen), stencil=stencil)
+        # The stencil is render's image-space path, reached inside on purpose: no public call times it
+        # apart from the rest of a frame (sc.Renderer times whole frames).
+        method = create_method("shadow_volume", device, stencil=stencil)
+
+        def prepare_volume(_):
+            method.prepare(scene.mesh, light, scene.bounds, eps)
+            device.queue.finish()
+            return method
+
+        volume = Contender({"prepare": prepare_volume, "query": lambda m: m.classify_view(view, zbuffer, seen)})
         try:
             truth, mask = side_by_side(exact, volume, repeats)
         except ValueError as error:            # z-pass refuses a near plane that cuts the volume: say so
             rows.append({"scene": name, "path": f"render {stencil} {width}x{height}", "failed": str(error)})
             continue
-        rows.append(row(name, f"render {stencil} {width}x{height}", truth, mask, exact, volume))
-        rows[-1].update(explain(volume.method, scene, light, eps, seen, mask, truth, height))
+        rows.append(row(name, f"render {stencil} {width}x{height}", truth, mask, exact, volume, repeats, method.stats))
+        rows[-1].update(explain(method, scene, light, eps, seen, mask, truth, height))
     return rows
 
 

@@ -26,8 +26,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import statistics
-import time
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -35,9 +33,11 @@ import numpy as np
 
 from report import to_json
 from run import machine
+from timing import Timing, clock
 import shadowcl as sc
 from shadowcl import get_device, raster
 from shadowcl.methods import create_method, default_eps
+from shadowcl.points import check_points
 from shadowcl.render import camera_view
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -68,6 +68,8 @@ def main(argv=None) -> dict:
     zbuffer = raster.rasterize(device, scene.mesh, view)
     seen = raster.receivers(device, scene.mesh, view, zbuffer)
     eps, light = default_eps(scene.bounds), scene.lights[0]
+    # Inside on purpose: the stencil's stages, and exact's classify on the same pixels as its yardstick
+    # (both without the public calls' receiver check), are what this profile splits apart.
     volume_method = create_method("shadow_volume", device)
     volume_method.prepare(scene.mesh, light, scene.bounds, eps)
     exact = create_method("exact", device, expected_receivers=len(seen.points))
@@ -76,16 +78,15 @@ def main(argv=None) -> dict:
     surface = volume_method._moved_depths(view, seen, zbuffer)
     kernel = device.kernel(raster._FILE, "raster_stencil", raster._OPTIONS + ("-DSTENCIL_ZFAIL=1",))
 
-    times: dict[str, list[float]] = {}
+    times: dict[str, Timing] = {}
     images: dict[str, np.ndarray] = {}
 
     def timed(name, call, keep):
+        """One stage between drained queues (stages depend on each other: timing.clock, not timing.timed)."""
         queue.finish()
-        start = time.perf_counter()
-        result = call()
-        queue.finish()
+        seconds, result = clock(lambda: (call(), queue.finish())[0])
         if keep:
-            times.setdefault(name, []).append(time.perf_counter() - start)
+            times.setdefault(name, Timing()).runs.append(seconds)
         return result
 
     for round_ in range(size["repeats"] + 1):          # round 0: warm-up
@@ -98,7 +99,7 @@ def main(argv=None) -> dict:
             timed("classify_view_bands64", lambda: volume_method.classify_view(view, zbuffer, seen), keep)
         finally:
             raster.STENCIL_MIN_GROUPS = chosen
-        timed("facing_away", lambda: volume_method._facing_away(seen.points, seen.normals), keep)
+        timed("facing_away", lambda: check_points(seen.points, seen.normals).facing_away(volume_method.light), keep)
         timed("moved_depths", lambda: volume_method._moved_depths(view, seen, zbuffer), keep)
         fresh = sc.Mesh(volume.vertices, volume.faces)   # a new volume, as after every prepare
         timed("geometry_upload", lambda: raster._geometry(device, fresh, view.origin), keep)
@@ -128,7 +129,7 @@ def main(argv=None) -> dict:
     extent = np.array(rows).reshape(-1, 2)
     big = extent[:, 0] * extent[:, 1] > raster.BIG_BOX
     fragments = raster.coverage_count(device, volume, view)
-    medians = {name: 1e3 * statistics.median(values) for name, values in times.items()}
+    medians = {name: timing.median_ms for name, timing in times.items()}
     result = {
         "when": datetime.now(timezone.utc).isoformat(timespec="seconds"), "machine": machine(device),
         "scene": args.scene, "width": width, "height": height, "repeats": size["repeats"], "bands": args.bands,
@@ -136,7 +137,7 @@ def main(argv=None) -> dict:
         "covered_pixels": int(len(seen.points)), "volume_triangles": int(len(volume.faces)),
         "big_triangles": int(big.sum()), "big_box_rows": int(extent[big, 1].sum()),
         "fragments": int(fragments.sum()), "max_overdraw": int(fragments.max()),
-        "median_ms": medians, "all_ms": {k: [1e3 * t for t in v] for k, v in times.items()},
+        "median_ms": medians, "all_ms": {k: [1e3 * t for t in v.runs] for k, v in times.items()},
         "classify_view_over_exact": medians["classify_view"] / medians["exact_classify"],
         "classify_view_bands64_over_exact": medians["classify_view_bands64"] / medians["exact_classify"],
         "classify_view_over_bands64": medians["classify_view"] / medians["classify_view_bands64"],
@@ -147,7 +148,7 @@ def main(argv=None) -> dict:
 
 def write(folder: Path, stem: str, result: dict) -> None:
     folder.mkdir(parents=True, exist_ok=True)
-    (folder / f"{stem}.json").write_text(json.dumps(to_json(result), indent=1))
+    (folder / f"{stem}.json").write_text(json.dumps(result, indent=1, default=to_json))
     lines = [f"# Shadow-volume stencil profile: {result['scene']} at {result['width']} x {result['height']}", "",
              f"{result['when']}; median of {result['repeats']} rounds after a warm-up, interleaved; shared "
              "2-core machine (other jobs running): compare ratios within this run, not absolute times.", "",

@@ -39,7 +39,6 @@ import argparse
 import json
 import statistics
 import sys
-import time
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -49,6 +48,7 @@ import receivers as rx
 from lod import light_path
 from report import save
 from run import machine
+from timing import clock
 import shadowcl as sc
 from shadowcl import get_device, lod, raster
 from shadowcl.methods import create_method, default_eps, method_class
@@ -87,28 +87,29 @@ def run_path(device, scene, mesh, view, zbuffer, seen, lights, lod_level, silhou
     A timing pass also runs a twin :class:`SilhouetteTracker` (the method's own settings, on the same
     occluder mesh, so the same edges) outside the frame's time, for the tracker's time alone
     (``tracker_s``): the method's silhouette stage adds its completeness check (a facing pass over
-    every face when the tracker gives none) and, on a redo frame, the brute force."""
+    every face when the tracker gives none) and, on a redo frame, the brute force.
+
+    The method is driven directly (``prepare`` + ``classify_view``, render's stencil path) on purpose:
+    Table II times the stages of each frame of a light path on one instance (its tracker's history)."""
     from shadowcl.silhouette import SilhouetteTracker, edge_adjacency, silhouette_edges
 
     method = create_method("shadow_volume", device, lod=lod_level, silhouettes=silhouettes)
     frames, twin = [], None
     for index, light in enumerate(lights):
-        start = time.perf_counter()
-        method.prepare(mesh, light, scene.bounds, eps)
-        prepared = time.perf_counter()
-        mask = method.classify_view(view, zbuffer, seen)
-        device.queue.finish()
-        end = time.perf_counter()
+        prepare_s, _ = clock(lambda: method.prepare(mesh, light, scene.bounds, eps))
+
+        def stencil():
+            mask = method.classify_view(view, zbuffer, seen)
+            device.queue.finish()
+            return mask
+        stencil_s, mask = clock(stencil)
         stats = method.stats
         tracker_s = None
         if not score:
             if twin is None or twin.adjacency is not edge_adjacency(method.occluders):
                 twin = SilhouetteTracker(device, method.occluders, method=silhouettes)
-            tracked = time.perf_counter()
-            twin.update(light)
-            device.queue.finish()
-            tracker_s = time.perf_counter() - tracked
-        frame = {"frame": index, "frame_s": end - start, "prepare_s": prepared - start, "stencil_s": end - prepared,
+            tracker_s, _ = clock(lambda: (twin.update(light), device.queue.finish()))
+        frame = {"frame": index, "frame_s": prepare_s + stencil_s, "prepare_s": prepare_s, "stencil_s": stencil_s,
                  "lod_s": stats["lod_s"], "silhouette_s": stats["silhouette_s"], "volume_s": stats["volume_s"],
                  "fallback": bool(stats["tracker"].get("fallback", False)),
                  "missed_edges": stats["silhouettes_missed"], "redo": stats["silhouettes_missed"] > 0,
@@ -136,13 +137,8 @@ def run_path(device, scene, mesh, view, zbuffer, seen, lights, lod_level, silhou
 
 def exact_truths(device, mesh, seen, lights, eps, frames) -> dict:
     """The exact method's mask of the camera's receivers on the full mesh, for each of ``frames``."""
-    truths = {}
-    exact = create_method("exact", device, expected_receivers=len(seen.points))
-    box = np.stack([seen.points.min(axis=0), seen.points.max(axis=0)])
-    for index in frames:
-        exact.prepare(mesh, lights[index], box, eps)
-        truths[index] = exact.classify(seen.points, seen.normals)
-    return truths
+    return {index: sc.shadow_mask(mesh, lights[index], seen.points, seen.normals, device=device, eps=eps)
+            for index in frames}
 
 
 def summarise(scored: list[dict], timed: list[list[dict]]) -> dict:

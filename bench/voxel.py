@@ -18,7 +18,8 @@ topology-versus-offset claim (for the flat ground it is Figure 1's lit plane: an
    up to 256: their leaf counts grow much faster), prepare (voxelize + determine) and classify; the
    exact method is the peer, timed in the same run (time ratio voxel / exact). Voxelization
    throughput: subpatches visited and occupied voxels per second of voxelization; memory: device bytes.
-   Median of repeats after a warm-up (one run after it at 512 and 1024 to keep them bounded).
+   Through the public calls (sc.prepare, Shadows.mask); median of repeats after a warm-up (timing.py;
+   one run after it at 512 and 1024 to keep them bounded).
 2. Second view of the same light (section 5.2): the classify time of a second receiver set with the
    frame buffer (a lookup) against without it (section 5.1: voxelize and determine again).
 3. Figure 1: the scenes' flat subdivision ground alone under a grazing point or directional light
@@ -30,9 +31,7 @@ Writes OUT/voxel.json, voxel.md, voxel.png. Timings share 2 cores with other wor
 from __future__ import annotations
 
 import argparse
-import statistics
 import sys
-import time
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -41,6 +40,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import receivers as rx  # noqa: E402
 from report import save  # noqa: E402
+from run import public_steps  # noqa: E402
+from timing import clock, timed, timed_steps  # noqa: E402
 
 import shadowcl as sc  # noqa: E402
 from shadowcl.methods import create_method, default_eps  # noqa: E402
@@ -79,22 +80,8 @@ def scene_receivers(scene: sc.Scene, count: int, seed: int):
     return (np.concatenate([p1, p2]).astype(np.float64), np.concatenate([n1, n2]).astype(np.float64), on_object)
 
 
-def timed(run, repeats: int) -> tuple[float, object]:
-    """Median wall time of ``run()`` over ``repeats`` after one warm-up (``repeats = 0``: the warm-up's own
-    time, for runs too long to repeat), and its last result."""
-    t0 = time.perf_counter()
-    result = run()
-    times = [time.perf_counter() - t0]
-    if repeats:
-        times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        result = run()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times), result
-
-
 def occupied_voxels(method) -> int:
+    """Occupied voxels of a prepared voxel method (its frame buffer: inside the method, untimed)."""
     words = method.vox.frame_words
     if words is None:
         return int(len(np.unique(method.vox.corner_voxels)))
@@ -112,12 +99,8 @@ def measure_scene(device, name: str, cfg: dict) -> dict:
     points, normals, on_object = scene_receivers(scene, cfg["receivers"], seed=1)
     box = np.stack([points.min(axis=0), points.max(axis=0)])
     eps = default_eps(scene.mesh.bounds)
-    exact = create_method("exact", device)
-
-    def run_exact():
-        exact.prepare(scene.mesh, light, box, eps)
-        return exact.classify(points, normals)
-    exact_s, truth = timed(run_exact, cfg["repeats"])
+    exact = timed_steps(public_steps(scene.mesh, light, "exact", box, points, normals, device, eps), cfg["repeats"])
+    exact_s, truth = exact["total"].median, exact["total"].result
     # Each surface alone, for the self-shadow error: its receivers and the exact answer without the others
     grid_box = np.stack([np.min([s.patch_table(device).points.min(axis=0) for _, s in scene.surfaces], axis=0),
                          np.max([s.patch_table(device).points.max(axis=0) for _, s in scene.surfaces], axis=0)])
@@ -125,8 +108,8 @@ def measure_scene(device, name: str, cfg: dict) -> dict:
     for object_name, surface in scene.surfaces:
         single = sc.Scene([(object_name, surface, segments(name, object_name))], scene.lights, name=object_name)
         rows = ~on_object if object_name == "ground" else on_object
-        exact.prepare(single.mesh, light, box, eps)
-        alone.append((single, rows, exact.classify(points[rows], normals[rows])))
+        alone.append((single, rows, sc.prepare(single.mesh, light, "exact", bounds=box, device=device, eps=eps)
+                      .mask(points[rows], normals[rows])))
     out = dict(scene=name, triangles=len(scene.mesh.faces), patches=sum(s.patch_count for _, s in scene.surfaces),
                receivers=len(points), on_object=int(on_object.sum()), exact_s=exact_s,
                truth_shadowed=float(truth.mean()), rows=[])
@@ -135,29 +118,31 @@ def measure_scene(device, name: str, cfg: dict) -> dict:
             if resolution > cfg["max_resolution"][connectivity]:
                 continue
             for determination in ("topology", "offset"):
-                method = create_method("voxel", device, resolution=resolution, determination=determination,
-                                       connectivity=connectivity, frame_buffer=True)
+                params = dict(resolution=resolution, determination=determination, connectivity=connectivity,
+                              frame_buffer=True)
                 repeats = cfg["repeats"] if resolution <= 256 else 1      # 512, 1024: one run after the warm-up
-                prep_s, _ = timed(lambda: method.prepare(scene, light, box, eps), repeats)
-                classify_s, mask = timed(lambda: method.classify(points, normals), cfg["repeats"])
-                st = method.stats
+                prepared = timed(lambda: sc.prepare(scene, light, "voxel", bounds=box, device=device, eps=eps,
+                                                    **params), repeats)
+                shadows = prepared.result
+                classified = timed(lambda: shadows.mask(points, normals), cfg["repeats"])
+                prep_s, classify_s, mask = prepared.median, classified.median, classified.result
+                st = shadows.stats
                 row = dict(resolution=resolution, determination=determination, connectivity=connectivity,
                            prepare_s=prep_s, classify_s=classify_s, total_s=prep_s + classify_s,
                            ratio_to_exact=(prep_s + classify_s) / exact_s,
                            leaves=st["leaves"], subpatches=st["subpatches"], forced_leaves=st["forced_leaves"],
-                           voxels=occupied_voxels(method), voxelize_s=st["voxelize_s"],
+                           voxels=occupied_voxels(shadows._instance), voxelize_s=st["voxelize_s"],
                            determine_s=st["determine_s"], lists_s=st["lists_s"], sort_s=st["sort_s"],
                            device_bytes=st["device_bytes"], frame_bytes=st["frame_bytes"],
                            list_entries=st.get("list_entries", 0), unplaced=st.get("unplaced", 0),
                            **errors(mask, truth, on_object))
                 row["subpatches_per_s"] = row["subpatches"] / max(row["voxelize_s"], 1e-9)
                 if connectivity == 26:
-                    own = create_method("voxel", device, resolution=resolution, determination=determination,
-                                        grid_bounds=grid_box)
                     self_mask, self_truth = np.zeros(len(points), bool), np.zeros(len(points), bool)
                     for single, rows, truth_alone in alone:
-                        own.prepare(single, light, box, eps)
-                        self_mask[rows] = own.classify(points[rows], normals[rows])
+                        self_mask[rows] = sc.prepare(single, light, "voxel", bounds=box, device=device, eps=eps,
+                                                     resolution=resolution, determination=determination,
+                                                     grid_bounds=grid_box).mask(points[rows], normals[rows])
                         self_truth[rows] = truth_alone
                     row["self"] = mask_error(self_mask, self_truth).as_dict()
                     row["self_ground"] = mask_error(self_mask[~on_object], self_truth[~on_object]).as_dict()
@@ -168,20 +153,20 @@ def measure_scene(device, name: str, cfg: dict) -> dict:
                       f"{row['object']['percent']:6.2f} %, ground {row['ground']['percent']:6.2f} %, self "
                       f"{row.get('self', {}).get('percent', float('nan')):6.3f} %)  leaves {row['leaves']}",
                       flush=True)
-                del method
+                del shadows, prepared
     # Second view of the same light: frame buffer (lookup) against none (determine again)
     resolution = min(256, max(cfg["resolutions"]))
     view2, normals2, _ = scene_receivers(scene, cfg["receivers"], seed=2)
     second = {}
     for frame_buffer in (True, False):
-        method = create_method("voxel", device, resolution=resolution, determination="topology", frame_buffer=frame_buffer)
-        t0 = time.perf_counter()
-        method.prepare(scene, light, box, eps)
-        method.classify(points, normals)
-        first_view = time.perf_counter() - t0
-        again_s, mask2 = timed(lambda: method.classify(view2, normals2), cfg["repeats"])
-        second["frame_buffer" if frame_buffer else "no_frame_buffer"] = dict(first_view_s=first_view, second_view_s=again_s)
-        second.setdefault("masks", []).append(mask2)
+        first_view, shadows = clock(lambda: sc.prepare(scene, light, "voxel", bounds=box, device=device, eps=eps,
+                                                      resolution=resolution, determination="topology",
+                                                      frame_buffer=frame_buffer))
+        first_view += clock(lambda: shadows.mask(points, normals))[0]
+        again = timed(lambda: shadows.mask(view2, normals2), cfg["repeats"])
+        second["frame_buffer" if frame_buffer else "no_frame_buffer"] = dict(first_view_s=first_view,
+                                                                             second_view_s=again.median)
+        second.setdefault("masks", []).append(again.result)
     same = bool(np.array_equal(*second.pop("masks")))
     second.update(resolution=resolution, same_answer=same,
                   speedup=second["no_frame_buffer"]["second_view_s"] / second["frame_buffer"]["second_view_s"])
@@ -210,6 +195,7 @@ def figure1(device, cfg: dict) -> list[dict]:
             truth = sc.shadow_mask(plane, light, points, normals, method="exact")
             for resolution in cfg["figure1_resolutions"]:
                 for determination in ("topology", "offset"):
+                    # reached inside on purpose (untimed): the sample states of the frame buffer
                     method = create_method("voxel", device, resolution=resolution, determination=determination)
                     method.prepare(plane, light, box, eps)
                     mask = method.classify(points, normals)

@@ -4,6 +4,7 @@ The harness is a bench extra (embreex, matplotlib): without them this module is 
 """
 
 import json
+import subprocess
 import sys
 
 import numpy as np
@@ -19,8 +20,9 @@ import peers  # noqa: E402
 import receivers as rx  # noqa: E402
 import report  # noqa: E402
 import run  # noqa: E402
+import timing  # noqa: E402
 from shadowcl import Mesh  # noqa: E402
-from shadowcl.methods import default_eps  # noqa: E402
+from shadowcl.methods import METHODS, Method, default_eps  # noqa: E402
 
 # A unit cube standing on y = 0, wound inwards on purpose: the scene must turn it outwards.
 CUBE_VERTICES = [(x, y, z) for x in (-0.5, 0.5) for y in (0.0, 1.0) for z in (-0.5, 0.5)]
@@ -30,19 +32,19 @@ CUBE_INWARD = Mesh(CUBE_VERTICES, np.array(CUBE_FACES_OUTWARD)[:, ::-1])
 COUNTS = {"ground": 3000, "model": 1000}
 
 
-class AllLit:
-    """Stand-in method (not registered): nothing is in shadow."""
+class AllLit(Method):
+    """Stand-in method, registered by the harness test only: nothing is in shadow. It keeps the receiver
+    boxes it was prepared for, so the test can see that the bench went through the public calls."""
 
     name = "all_lit"
     parameters = {"label": ("a", "a dummy parameter, to exercise the sweep")}
+    prepared_bounds: list = []
 
-    def __init__(self, label="a"):
+    def prepare(self, occluders, light, receiver_bounds, eps):
+        self.prepared_bounds.append(np.array(receiver_bounds))
         self.stats = {"device_bytes": 2**20}
 
-    def prepare(self, mesh, light, receiver_bounds, eps):
-        pass
-
-    def classify(self, points, normals):
+    def classify(self, points, normals=None):
         return np.zeros(len(points), bool)
 
 
@@ -111,24 +113,77 @@ def test_embree_peer_agrees_with_brute_force(scene, workers):
     assert 0 < expected.sum() < len(expected)
 
 
-def test_harness_rows_reports_and_compare(scene, device, tmp_path):
+def counting(calls: dict, name: str, function):
+    """``function``, counting its calls with a stand-in method in ``calls[name]``."""
+    def counted(*args, **kwargs):
+        if kwargs.get("method", args[2] if len(args) > 2 else None) == "all_lit":
+            calls[name] = calls.get(name, 0) + 1
+        return function(*args, **kwargs)
+    return counted
+
+
+def test_harness_rows_reports_and_compare(scene, device, tmp_path, monkeypatch):
+    monkeypatch.setitem(METHODS, "all_lit", f"{__name__}:AllLit")
+    calls = {}
+    monkeypatch.setattr(run.sc, "shadow_mask", counting(calls, "shadow_mask", run.sc.shadow_mask))
+    monkeypatch.setattr(run.sc, "prepare", counting(calls, "prepare", run.sc.prepare))
+    monkeypatch.setattr(AllLit, "prepared_bounds", [])
     sweep = {"all_lit": {"label": ["a", "b"]}, "embreex": {"workers": [1]}}
-    doc = run.run_bench([scene], sweep, COUNTS, repeats=2, device=device,
-                        peers={**peers.PEERS, "all_lit": AllLit}, progress=False)
+    doc = run.run_bench([scene], sweep, COUNTS, repeats=2, device=device, progress=False)
     rows = doc["rows"]
     assert [r["label"] for r in rows] == ["all_lit label=a", "all_lit label=b", "embreex workers=1"]
+    # per setting, public calls only: shadow_mask cold, warm-up, 2 timed, 1 profiled; prepare warm-up, 2 timed
+    assert calls == {"shadow_mask": 2 * 5, "prepare": 2 * 3}
+    points, _ = rx.receivers(scene, **COUNTS)
+    box = np.stack([points.min(axis=0), points.max(axis=0)])
+    assert len(AllLit.prepared_bounds) == 2 * 8
+    assert all(np.allclose(b, box) for b in AllLit.prepared_bounds)
     for row in rows[:2]:
         assert row["false_shadow"] == 0 and row["false_light"] == row["in_shadow"] > 0
         assert row["error_percent"] == pytest.approx(100 * row["in_shadow"] / 4000)
+        assert row["prepared_wrong"] == row["in_shadow"]
         assert row["device_mib"] == 1.0 and row["host_peak_mib"] is not None
-    assert rows[2]["vs_peer"] == 1.0 and rows[2]["wrong"] <= 2
-    assert all(r["total_s"] > 0 and len(r["classify_runs_s"]) == 2 for r in rows)
+        assert 0 < row["host_s"] <= row["host_profiled_wall_s"] and 0 < row["host_share"] <= 1
+        assert row["receivers_per_s"] == pytest.approx(4000 / row["oneshot_s"])
+    peer = rows[2]
+    assert peer["vs_peer"] == 1.0 and peer["wrong"] <= 2 and peer["host_share"] is None
+    # the peer's one-shot time is its prepare + classify, run by run; vs_peer compares one-shot throughputs
+    assert peer["oneshot_runs_s"] == pytest.approx([p + q for p, q in zip(peer["prepare_runs_s"], peer["query_runs_s"])])
+    assert rows[0]["vs_peer"] == pytest.approx(peer["oneshot_s"] / rows[0]["oneshot_s"])
+    assert all(r["oneshot_s"] > 0 and len(r["query_runs_s"]) == len(r["prepare_runs_s"]) == 2 for r in rows)
     doc = json.loads(json.dumps(doc, default=report.to_json))
     table = report.markdown(doc, plot_name="plot.png")
     assert table.count("| cube | 0 |") == 3 and "![speed against error](plot.png)" in table
     report.plot(doc, tmp_path / "plot.png")
     assert (tmp_path / "plot.png").stat().st_size > 0
     assert report.compare(doc, doc).count("| 1 | 1 | 1 |") == 3
+
+
+def test_host_share_counts_opencl_calls_as_device_time(device):
+    """A call that only waits in pyopencl has almost no host share; one that only works in NumPy, all."""
+    data = np.zeros(1 << 22, np.float32)
+    buffer = device.to_device(data)
+    copy = run.host_share(lambda: [device.from_device(buffer, data.shape, data.dtype) for _ in range(20)])
+    numpy = run.host_share(lambda: [np.sort(data + 1) for _ in range(3)])
+    assert copy["host_share"] < 0.2 and numpy["host_share"] > 0.9, (copy, numpy)
+
+
+def test_timing_warms_up_then_times_every_repeat_in_rounds():
+    order = []
+    timings = timing.interleaved({"a": lambda: order.append("a") or 1, "b": lambda: order.append("b") or 2},
+                                 repeats=3, warmup=1)
+    assert order == ["a", "b"] * 4
+    assert [len(t.runs) for t in timings.values()] == [3, 3] and timings["b"].result == 2
+    t = timing.Timing([3.0, 1.0, 2.0])
+    assert (t.median, t.min) == (2.0, 1.0)
+    assert len(timing.timed(lambda: None, repeats=0, warmup=0).runs) == 1
+
+
+def test_figures_in_readme_match_the_committed_results():
+    """README's generated blocks are what bench/figures.py makes from bench/results/*.json."""
+    result = subprocess.run([sys.executable, str(PROJECT / "bench" / "figures.py"), "--check"],
+                            capture_output=True, text=True)
+    assert result.returncode == 0, result.stdout + result.stderr
 
 
 def test_sweep_grid_expands_to_every_combination():

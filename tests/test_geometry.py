@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import shadowcl as sc
-from shadowcl.methods import shadow_mask
+from shadowcl.shadows import shadow_mask
 
 from conftest import require_models
 

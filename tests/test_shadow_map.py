@@ -17,7 +17,8 @@ import pytest
 import shadowcl as sc
 from shadowcl import lightspace
 from shadowcl.exact import ExactMethod
-from shadowcl.methods import default_eps, shadow_mask
+from shadowcl.methods import default_eps
+from shadowcl.shadows import shadow_mask
 from shadowcl.metrics import mask_error
 from shadowcl.reference import raster as raster_ref
 from shadowcl.reference import shadow_map as ref

@@ -107,10 +107,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .checks import finite_array, positive_int, vector3
+from .checks import choice, flag, optional_int, positive_int, vector3
 from .geometry import Mesh
 from .lights import PointLight, check_light
-from .methods import check_prepare
+from .methods import Method, check_prepare
+from .points import check_points
 from .silhouette import edge_adjacency, silhouette_edges, silhouette_loops
 
 REC_FLOATS = 8                 # kernels/angular.cl: REC
@@ -530,11 +531,7 @@ def closed_faces(adjacency) -> tuple[np.ndarray, np.ndarray]:
 
 # Method ----------------------------------------------------------------------------------------------------
 
-def _optional_int(name, value, minimum=1, maximum=None):
-    return None if value is None else positive_int(name, value, minimum, maximum)
-
-
-class AngularMethod:
+class AngularMethod(Method):
     """Shadows from a per-light table of angular spans (see the module docstring).
 
     After :meth:`prepare`, :attr:`stats` holds the rows, records, table bytes and stage times;
@@ -543,6 +540,7 @@ class AngularMethod:
     """
 
     name = "angular"
+    image_space = True
     parameters = {
         "theta_resolution": (None, "rows of the table (theta steps; Y steps for a directional light); None picks "
                                    "them from the receivers (eq. 4: one row per receiver spacing at the farthest "
@@ -557,34 +555,37 @@ class AngularMethod:
                            "the camera's right axis when it is clear of them (rows along the scan lines)"),
     }
 
-    def __init__(self, device, theta_resolution=None, expected_receivers=None, runs=True, prefer_x=None,
-                 table="faces"):
-        self.device = device
-        if not isinstance(table, str):
-            raise TypeError(f"table: expected 'faces' or 'loops', got {type(table).__name__}")
-        if table not in TABLES:
-            raise ValueError(f"table: expected one of {TABLES}, got {table!r}")
-        self.table_kind = table
-        self.theta_resolution = _optional_int("theta_resolution", theta_resolution, 1, MAX_ROWS)
-        self.expected_receivers = _optional_int("expected_receivers", expected_receivers, 0)
-        if not isinstance(runs, (bool, np.bool_)):
-            raise TypeError(f"runs: expected a bool, got {type(runs).__name__}")
-        self.runs = bool(runs)
-        self.prefer_x = None if prefer_x is None else vector3("prefer_x", prefer_x, nonzero=True)
+    def __init__(self, device, **params):
+        super().__init__(device, **params)
+        p = self.params
+        if not isinstance(p["table"], str):
+            raise TypeError(f"table: expected 'faces' or 'loops', got {type(p['table']).__name__}")
+        self.table_kind = choice("table", p["table"], TABLES)
+        self.theta_resolution = optional_int("theta_resolution", p["theta_resolution"], 1, MAX_ROWS)
+        self.expected_receivers = optional_int("expected_receivers", p["expected_receivers"], 0)
+        self.runs = flag("runs", p["runs"])
+        self.prefer_x = None if p["prefer_x"] is None else vector3("prefer_x", p["prefer_x"], nonzero=True)
         self.table: Table | None = None
-        self.stats: dict = {}
         self._fp64 = "cl_khr_fp64" in device.cl_device.extensions   # receivers moved into the frame on the device
 
-    def __repr__(self) -> str:
-        return f"AngularMethod(theta_resolution={self.theta_resolution}, table={self.table_kind!r}, runs={self.runs})"
+    def resolved_params(self) -> dict:
+        params = dict(self.params)
+        if self.table is not None:
+            params["theta_resolution"] = self.frame.rows
+        return params
 
     # prepare -------------------------------------------------------------------------------------------
-    def prepare(self, mesh: Mesh, light, receiver_bounds, eps: float, prefer_x=None, rows=None) -> None:
-        """Build ``light``'s table for occluders ``mesh`` and receivers in ``receiver_bounds`` ((2, 3)).
-
-        ``prefer_x`` and ``rows`` override the pole axis and the row count for this build
-        (:meth:`classify_view` rebuilds with the camera's right axis and the image's own limit)."""
+    def prepare(self, mesh: Mesh, light, receiver_bounds, eps: float) -> None:
+        """Build ``light``'s table for occluders ``mesh`` and receivers in ``receiver_bounds`` ((2, 3))."""
         light, box = check_prepare(mesh, light, receiver_bounds, eps)
+        self._build(mesh, light, box, float(eps), self.prefer_x, None)
+        self._prepared_table = (self.frame, self.table, self.stats)   # where every view's choice starts
+        self._view_key = None            # the view classify_view last chose a table for (None: none yet)
+
+    def _build(self, mesh: Mesh, light, box: np.ndarray, eps: float, prefer_x, rows) -> None:
+        """The table with pole axis ``prefer_x`` (None: away from the occluders) and ``rows`` rows (None: the
+        parameter or eq. 4); :meth:`classify_view` rebuilds with the camera's right axis and the image's own
+        limit."""
         t0 = time.perf_counter()
         point = isinstance(light, PointLight)
         adjacency = edge_adjacency(mesh)
@@ -599,8 +600,7 @@ class AngularMethod:
         used[mesh.faces[table_faces]] = True                      # (np.unique hashes: 2 s at 1.8 M corners)
         used = np.flatnonzero(used)
         sample = used if len(used) <= SAMPLE else used[np.linspace(0, len(used) - 1, SAMPLE).astype(np.int64)]
-        prefer = self.prefer_x if prefer_x is None else prefer_x
-        origin, rotation = angular_frame(light, mesh.vertices[sample], prefer)
+        origin, rotation = angular_frame(light, mesh.vertices[sample], prefer_x)
         local = (mesh.vertices.astype(np.float64) - origin) @ rotation.T
         t1 = time.perf_counter()
         # Row range: the table faces' corners (for a closed mesh these span the RE loops' range, section 3)
@@ -641,7 +641,7 @@ class AngularMethod:
         self.loops = loops
         self.stats["prepare_s"] = time.perf_counter() - t0
         self.mesh, self.light, self.eps, self.frame, self._box = mesh, light, float(eps), frame, box
-        self._sample = sample
+        self._sample, self._built_prefer = sample, prefer_x
         self._directions = _unit_directions(light, mesh.vertices[sample]) if point else np.zeros((0, 3))
 
     def _closed_loops(self, mesh, adjacency, sil, closed, light, local):
@@ -675,14 +675,8 @@ class AngularMethod:
         into the frame on the device when it has doubles, else moved here and rounded to float32."""
         if self.table is None:
             raise RuntimeError("classify: call prepare(mesh, light, receiver_bounds, eps) first")
-        points = finite_array("points", points, (3,))
-        if normals is not None:
-            normals = finite_array("normals", normals, (3,))
-            if normals.shape != points.shape:
-                raise ValueError(f"normals: expected shape {points.shape} to match points, got {normals.shape}")
-            length = np.linalg.norm(normals, axis=1)
-            if np.any(length == 0):
-                raise ValueError(f"normals: zero-length normal at index {int(np.argmin(length))}")
+        receivers = check_points(points, normals)
+        points, normals = receivers.positions, receivers.normals
         dev, frame = self.device, self.frame
         if self._fp64:
             rot, origin, dtype = frame.rotation, frame.origin, np.float64
@@ -690,7 +684,7 @@ class AngularMethod:
         else:
             rot, origin, dtype = frame.rotation, np.zeros(3), np.float32
             pts = frame.to_local(points)
-            nrm = None if normals is None else (normals / np.linalg.norm(normals, axis=1, keepdims=True)) @ rot.T
+            nrm = None if normals is None else receivers.unit_normals() @ rot.T
         pts_g = dev.to_device(np.ascontiguousarray(pts, dtype=dtype))
         nrm_g = pts_g if nrm is None else dev.to_device(np.ascontiguousarray(nrm, dtype=dtype))
         args = (pts_g, nrm_g, dev.to_device(np.ascontiguousarray(rot, dtype=dtype)), *(dtype(c) for c in origin))
@@ -716,16 +710,23 @@ class AngularMethod:
 
     def classify_view(self, view, zbuffer, seen) -> np.ndarray:
         """Bool mask of ``seen``'s covered pixels (row-major), by scan-line runs (``runs=True``) or per pixel."""
-        right = view.matrix[0, :3] / np.linalg.norm(view.matrix[0, :3])   # camera right, the scan-line direction
-        prefer = self.prefer_x
-        if prefer is None and abs(float(self.frame.rotation[0] @ right)) < 0.999 and (
-                not self.frame.point or _pole_clearance(right, self._directions) >= POLE_CLEARANCE):
-            prefer = right      # rows along the scan lines (the paper's frame: XY parallel to the screen)
-        rows = self.frame.rows if self.theta_resolution is not None else self.view_rows(seen, view, prefer)
-        if rows != self.frame.rows or prefer is not self.prefer_x:
-            build_s = self.stats.get("prepare_s", 0.0)
-            self.prepare(self.mesh, self.light, self._box, self.eps, prefer_x=prefer, rows=rows)
-            self.stats["prepare_s"] += build_s
+        key = (view.width, view.height, view.origin.tobytes(), view.matrix.tobytes())
+        if key != self._view_key:       # a new view: choose its table from prepare's, build it at most once
+            base = self._prepared_table[0]
+            right = view.matrix[0, :3] / np.linalg.norm(view.matrix[0, :3])   # camera right, the scan-line direction
+            prefer = self.prefer_x
+            if prefer is None and abs(float(base.rotation[0] @ right)) < 0.999 and (
+                    not base.point or _pole_clearance(right, self._directions) >= POLE_CLEARANCE):
+                prefer = right      # rows along the scan lines (the paper's frame: XY parallel to the screen)
+            rows = base.rows if self.theta_resolution is not None else self.view_rows(seen, view, prefer)
+            if rows == base.rows and _same_axis(prefer, self.prefer_x):
+                self.frame, self.table, self.stats = self._prepared_table
+                self._built_prefer = self.prefer_x
+            elif rows != self.frame.rows or not _same_axis(prefer, self._built_prefer):
+                build_s = self._prepared_table[2].get("prepare_s", 0.0)
+                self._build(self.mesh, self.light, self._box, self.eps, prefer, rows)
+                self.stats["prepare_s"] += build_s
+            self._view_key = key
         if not self.runs:
             mask = self.classify(seen.points, seen.normals)
             self.stats["lookups"] = len(mask)
@@ -736,10 +737,10 @@ class AngularMethod:
         """Rows at the image's own limit (section 3): one row per scan line, i.e. the table's row-coordinate
         span over the median row-coordinate step between vertically adjacent covered pixels, times
         :data:`ROWS_PER_LINE`."""
+        frame = self._prepared_table[0]
         if len(seen.points) == 0:
-            return self.frame.rows
-        frame = self.frame
-        if prefer_x is not None and prefer_x is not self.prefer_x:
+            return frame.rows
+        if not _same_axis(prefer_x, self.prefer_x):
             _, rotation = angular_frame(self.light, self.mesh.vertices[self._sample], prefer_x)
             frame = Frame(frame.origin, rotation, frame.point, frame.t0, frame.dt, frame.rows, frame.full_circle)
         t = np.full(view.height * view.width, np.nan)
@@ -749,7 +750,7 @@ class AngularMethod:
             step = np.minimum(step, 2 * np.pi - step)
         step = step[np.isfinite(step) & (step > 0)]
         if len(step) == 0:
-            return self.frame.rows
+            return frame.rows
         span = 2 * np.pi if frame.full_circle else frame.rows * frame.dt
         return int(np.clip(np.ceil(ROWS_PER_LINE * span / np.median(step)), MIN_ROWS, MAX_ROWS))
 
@@ -817,6 +818,11 @@ def light_inside(mesh: Mesh, light, closed: np.ndarray, label: np.ndarray) -> No
                              "light out or open the mesh")
 
 
+def _same_axis(a, b) -> bool:
+    """Whether two optional pole axes (None or 3-vectors) are the same."""
+    return (a is None) == (b is None) and (a is None or bool(np.array_equal(a, b)))
+
+
 def _around_pole(local: np.ndarray, faces: np.ndarray) -> bool:
     """Whether any triangle's projection on the YZ plane contains the origin (the pole axis crosses it)."""
     u, v = local[:, 1][faces], -local[:, 2][faces]
@@ -835,26 +841,22 @@ def _box_corners(box: np.ndarray) -> np.ndarray:
 
 
 def shadow_counts(scene_or_mesh, lights, points, normals=None, device=None, eps=None, **params) -> np.ndarray:
-    """Section 11.1: int32 (N,) number of ``lights`` shadowing each of ``points`` -- one table per light."""
-    from .device import get_device
-    from .methods import as_mesh, check_points, default_eps
-    from .checks import non_negative_float
+    """Section 11.1: int32 (N,) number of ``lights`` shadowing each of ``points`` -- one table per light,
+    on one method instance (``sc.prepare(..., method="angular")`` prepared again for each light)."""
+    from .shadows import prepare
 
-    mesh = as_mesh(scene_or_mesh)
     lights = list(lights) if isinstance(lights, (list, tuple)) else [lights]
     if not lights:
         raise ValueError("lights: expected at least one light")
     lights = [check_light(light) for light in lights]
-    points, normals = check_points(points, normals)
-    eps = default_eps(mesh.bounds) if eps is None else non_negative_float("eps", eps)
-    counts = np.zeros(len(points), dtype=np.int32)
-    if len(points) == 0:
+    receivers = check_points(points, normals)
+    counts = np.zeros(len(receivers), dtype=np.int32)
+    if len(receivers) == 0:
         return counts
-    device = get_device(device)
-    box = np.stack([points.min(axis=0), points.max(axis=0)])
-    params.setdefault("expected_receivers", len(points))
-    for light in lights:
-        method = AngularMethod(device, **params)
-        method.prepare(mesh, light, box, eps)
-        counts += method.classify(points, normals)
+    params.setdefault("expected_receivers", len(receivers))
+    shadows = prepare(scene_or_mesh, lights[0], "angular", receivers.bounds, device, eps, **params)
+    for index, light in enumerate(lights):
+        if index:
+            shadows._prepare(light)
+        counts += shadows.mask(receivers)
     return counts

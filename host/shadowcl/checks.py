@@ -77,3 +77,22 @@ def check_bounds(name: str, bounds) -> np.ndarray:
     if np.any(box[0] > box[1]):
         raise ValueError(f"{name}: low corner {box[0].tolist()} exceeds high corner {box[1].tolist()}")
     return box
+
+
+def optional_int(name: str, value, minimum: int = 1, maximum: int | None = None) -> int | None:
+    """None, or ``value`` checked by :func:`positive_int`."""
+    return None if value is None else positive_int(name, value, minimum, maximum)
+
+
+def choice(name: str, value, choices: tuple):
+    """``value`` if it is one of ``choices`` and of the same type (1.0 == 1 would otherwise pass)."""
+    if isinstance(value, bool) or type(value) not in {type(c) for c in choices} or value not in choices:
+        raise ValueError(f"{name}: expected one of {', '.join(map(repr, choices))}, got {value!r}")
+    return value
+
+
+def flag(name: str, value) -> bool:
+    """``value`` if it is a bool (NumPy's included)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name}: expected a bool, got {type(value).__name__}")
+    return bool(value)

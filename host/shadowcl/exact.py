@@ -41,13 +41,9 @@ receivers on the ground + 200 k on the model, random order, PoCL on 2 cores; ran
   coarse cell: bunny 2.6, ogre 3.1, teapot 2.9, where a forced split shortened the mean walk by less
   than 0.2 entries, for five more builds).
 
-Where the time goes (bunny, point light, 1.2 M receivers; ~80 ms in all, ~14 M receivers/s, 1.7-2.3x
-the fastest embreex in the same bench run): prepare ~19 ms (count pass ~10: projection ~3-4, cell tests
-~4, atomics ~3; fill ~3-5 from the count pass's cell masks; footprint fit ~2; scan 0.4; gather and
-records ~1), classify ~60 ms, of which ~12 ms per-receiver set-up and ~45 ms walking lists: with every
-receiver sent to one cached cell the same kernel takes ~26 ms, so most of classify is the latency of
-reaching lists and records (L3-resident, in random receiver order). Receivers in a coherent order (a
-camera's raster) run ~1.5x faster.
+Where the time goes, per stage (``stats``: upload, views, lists, records; classify), and how fast the
+public call is against Embree: bench/results (``python bench/run.py``; README's figures are generated
+from those files by ``bench/figures.py``).
 
 >>> method = ExactMethod(get_device())
 >>> method.prepare(mesh, light, receiver_bounds, eps)      # lists on the device
@@ -63,10 +59,11 @@ import numpy as np
 import pyopencl as cl
 
 from . import lightspace
-from .checks import positive_int
+from .checks import choice, flag, optional_int, positive_int
 from .geometry import Mesh, bounds_diagonal
 from .lights import PointLight
-from .methods import check_prepare
+from .methods import Method, check_prepare
+from .points import check_points
 
 TESTS = ("watertight", "dot5")
 LISTS = ("csr", "linked")
@@ -74,24 +71,6 @@ DOT5_FLOATS = 16          # kernels/ray_triangle.h
 WT_FLOATS = 16
 SPLIT_PER_COARSE_CELL = 8.0   # coarse entries per coarse cell above which large triangles are split
 SPLIT_ROUNDS = 4              # rounds of two bisections at most: a piece keeps at least 1/256 of its triangle
-
-
-def _optional_int(name, value, minimum=1, maximum=None):
-    return None if value is None else positive_int(name, value, minimum, maximum)
-
-
-def _as_points(name: str, value) -> np.ndarray:
-    """(N, 3) C-contiguous float64 (shape and type checked here; finiteness on the device)."""
-    try:
-        array = np.asarray(value)
-    except Exception as error:
-        raise TypeError(f"{name}: cannot be read as an array ({error})") from None
-    if array.dtype == object or not (np.issubdtype(array.dtype, np.number) or array.dtype == bool) \
-            or np.issubdtype(array.dtype, np.complexfloating):
-        raise TypeError(f"{name}: expected a real numeric array, got dtype {array.dtype}")
-    if array.ndim != 2 or array.shape[1] != 3:
-        raise ValueError(f"{name}: expected shape (N, 3), got {array.shape}")
-    return np.ascontiguousarray(array, dtype=np.float64)
 
 
 def bisect_longest_edges(pieces: np.ndarray, owner: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -133,7 +112,7 @@ def _host_buffer(device, array: np.ndarray):
     return cl.Buffer(device.context, cl.mem_flags.READ_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=array)
 
 
-class ExactMethod:
+class ExactMethod(Method):
     """Exact shadows: light-space lists built on the device, then one list walk per receiver.
 
     Parameters are those of :attr:`parameters`. After :meth:`prepare`, :attr:`stats` holds the grid
@@ -160,29 +139,20 @@ class ExactMethod:
                         "by pieces small enough for the fine grid; the walk still tests the whole triangle"),
     }
 
-    def __init__(self, device, resolution=None, expected_receivers=None, test="watertight", lists="csr",
-                 initial_capacity=None, chunk=1 << 22, split=True):
-        self.device = device
-        self.resolution = _optional_int("resolution", resolution, 1, lightspace.MAX_SIDE)
-        self.expected_receivers = _optional_int("expected_receivers", expected_receivers, 0)
-        if test not in TESTS:
-            raise ValueError(f"test: expected one of {TESTS}, got {test!r}")
-        if lists not in LISTS:
-            raise ValueError(f"lists: expected one of {LISTS}, got {lists!r}")
-        self.test, self.lists_kind = test, lists
-        self.initial_capacity = _optional_int("initial_capacity", initial_capacity, 1)
-        self.chunk = positive_int("chunk", chunk)
-        if not isinstance(split, (bool, np.bool_)):
-            raise TypeError(f"split: expected a bool, got {type(split).__name__}")
-        self.split = bool(split)
+    def __init__(self, device, **params):
+        super().__init__(device, **params)
+        p = self.params
+        self.resolution = optional_int("resolution", p["resolution"], 1, lightspace.MAX_SIDE)
+        self.expected_receivers = optional_int("expected_receivers", p["expected_receivers"], 0)
+        self.test = choice("test", p["test"], TESTS)
+        self.lists_kind = choice("lists", p["lists"], LISTS)
+        self.initial_capacity = optional_int("initial_capacity", p["initial_capacity"], 1)
+        self.chunk = positive_int("chunk", p["chunk"])
+        self.split = flag("split", p["split"])
         self._builder = lightspace.ListBuilder(device, corners=3)
         # float64 points go to the device as they are when it has doubles (cheaper than converting here)
         self._fp64 = "cl_khr_fp64" in device.cl_device.extensions
         self._prepared = False
-        self.stats: dict = {}
-
-    def __repr__(self) -> str:
-        return f"ExactMethod(test={self.test!r}, lists={self.lists_kind!r}, resolution={self.resolution})"
 
     # prepare -------------------------------------------------------------------------------------------
     def prepare(self, mesh: Mesh, light, receiver_bounds, eps: float) -> None:
@@ -244,6 +214,13 @@ class ExactMethod:
             mean_list=(lists.entries - max(lists.coarse_entries, 0)) / grid.fine_cells,
             upload_s=t1 - t0, views_s=t2 - t1, lists_s=t3 - t2, records_s=t4 - t3, prepare_s=t4 - t0,
         )
+
+    def resolved_params(self) -> dict:
+        """The parameters, with the grid resolution picked (cells on the longer side of the largest view)."""
+        params = dict(self.params)
+        if self._prepared and params["resolution"] is None:
+            params["resolution"] = int(max(self.grid.nx.max(), self.grid.ny.max()))
+        return params
 
     def _split_lists(self, grid, lists, vertices: np.ndarray, faces: np.ndarray):
         """CSR lists binned by pieces of the triangles in ``lists``' coarse cells, entries naming triangles.
@@ -349,16 +326,13 @@ class ExactMethod:
         doubles, else on the host). Any point works, inside the prepared receiver bounds or not: outside
         the window it is looked up in the border cells, which extend to the view's domain; a point behind
         a single perspective view (only possible outside the prepared bounds) is tested against every
-        triangle instead. NaN or inf coordinates and zero normals raise ``ValueError``.
+        triangle instead. Receivers are checked by :func:`shadowcl.points.check_points`.
         """
         if not self._prepared:
             raise RuntimeError("classify: call prepare(mesh, light, receiver_bounds, eps) first")
         t0 = time.perf_counter()
-        points = _as_points("points", points)
-        if normals is not None:
-            normals = _as_points("normals", normals)
-            if normals.shape != points.shape:
-                raise ValueError(f"normals: expected shape {points.shape} to match points, got {normals.shape}")
+        receivers = check_points(points, normals)
+        points, normals = receivers.positions, receivers.normals
         n = len(points)
         out = np.empty(n, dtype=np.uint8)
         for lo in range(0, n, self.chunk):
@@ -421,7 +395,7 @@ class ExactMethod:
         """
         if not self._prepared:
             raise RuntimeError("walk_lengths: call prepare(mesh, light, receiver_bounds, eps) first")
-        rel = _as_points("points", points) - self.origin
+        rel = check_points(points).positions - self.origin
         fine, coarse, _ = lightspace.point_cells(self.device, self.grid, rel)
         lengths = self._list_lengths()
         return lengths[fine] + (lengths[coarse] if self.lists.coarse_entries != 0 else 0)

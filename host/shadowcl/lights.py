@@ -45,3 +45,11 @@ def check_light(light) -> Light:
     if not isinstance(light, (PointLight, DirectionalLight)):
         raise TypeError(f"light: expected a PointLight or DirectionalLight, got {type(light).__name__}")
     return light
+
+
+def same_light(a, b) -> bool:
+    """Whether lights ``a`` and ``b`` are the same light (type and coordinates, bit for bit)."""
+    if type(a) is not type(b):
+        return False
+    vector = "position" if isinstance(a, PointLight) else "direction"
+    return bool(np.array_equal(getattr(a, vector), getattr(b, vector)))

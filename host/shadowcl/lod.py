@@ -40,10 +40,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .checks import check_bounds, finite_array, non_negative_float
+from .checks import check_bounds, non_negative_float
 from .geometry import Mesh
 from .lights import PointLight, check_light
 from .metrics import MaskError, mask_error
+from .points import check_points
 
 # 1 is the mesh itself. 0.5 and 0.1 are Table I's reductions (teapot 6,320 -> 3,160; bunny 69,451 ->
 # 6,945); the steps between at most halve the triangles, so "auto" is never forced more than ~2x finer
@@ -218,12 +219,10 @@ _all_levels = levels  # level_errors' parameter ``levels`` hides the function
 
 
 # errors ----------------------------------------------------------------------------------------------
-def _classify(device, occluder: Mesh, light, points, normals, eps: float) -> np.ndarray:
-    from .methods import create_method
+def _classify(device, occluder: Mesh, light, receivers, eps: float) -> np.ndarray:
+    from .shadows import shadow_mask
 
-    exact = create_method("exact", device, expected_receivers=max(len(points), 1))
-    exact.prepare(occluder, light, np.stack([points.min(axis=0), points.max(axis=0)]), eps)
-    return exact.classify(points, normals)
+    return shadow_mask(occluder, light, receivers, method="exact", device=device, eps=eps)
 
 
 def level_errors(device, mesh: Mesh, light, points, normals, eps: float, levels=None) -> list[MaskError]:
@@ -235,24 +234,20 @@ def level_errors(device, mesh: Mesh, light, points, normals, eps: float, levels=
     if not isinstance(mesh, Mesh):
         raise TypeError(f"mesh: expected a Mesh, got {type(mesh).__name__}")
     light = check_light(light)
-    points = finite_array("points", points, (3,))
-    if len(points) == 0:
+    receivers = check_points(points, normals)
+    if len(receivers) == 0:
         raise ValueError("points: no receivers")
-    if normals is not None:
-        normals = finite_array("normals", normals, (3,))
-        if normals.shape != points.shape:
-            raise ValueError(f"normals: expected shape {points.shape} to match points, got {normals.shape}")
     eps = non_negative_float("eps", eps)
     chosen = _all_levels(mesh) if levels is None else list(levels)
     for i, level in enumerate(chosen):
         if not isinstance(level, Mesh):
             raise TypeError(f"levels[{i}]: expected a Mesh, got {type(level).__name__}")
-    truth = _classify(device, mesh, light, points, normals, eps)
+    truth = _classify(device, mesh, light, receivers, eps)
     masks: dict[int, np.ndarray] = {id(mesh): truth}
     errors = []
     for level in chosen:
         if id(level) not in masks:
-            masks[id(level)] = _classify(device, level, light, points, normals, eps)
+            masks[id(level)] = _classify(device, level, light, receivers, eps)
         errors.append(mask_error(masks[id(level)], truth))
     return errors
 

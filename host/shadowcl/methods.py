@@ -1,43 +1,45 @@
-"""The shadow methods behind one interface, and :func:`shadow_mask`, the one-shot call over them.
+"""The method protocol every shadow method implements, and the registry of methods.
 
-A method is "prepare once, query many". Each is a class registered in :data:`METHODS`::
+A method is "prepare once, query many": :meth:`Method.prepare` builds the light-space structure for
+one set of occluders seen from one light, for receivers in a box; :meth:`Method.classify` then answers
+any number of points. Users reach methods through :func:`shadowcl.prepare` (a :class:`shadowcl.Shadows`)
+and :class:`shadowcl.Renderer`, which add defaults, timing and the bounds rule; this module is what a
+method implements::
 
-    class SomeMethod:
+    class SomeMethod(Method):
         name = "some"
         parameters = {"resolution": (None, "grid cells per side; None picks one from the scene")}
-        def __init__(self, device: Device, **params): ...
-        def prepare(self, mesh: Mesh, light, receiver_bounds: np.ndarray, eps: float) -> None: ...
-        def classify(self, points: np.ndarray, normals: np.ndarray | None) -> np.ndarray: ...
+        def __init__(self, device, **params):
+            super().__init__(device, **params)          # self.params: every parameter, defaults filled
+            self.resolution = check(self.params["resolution"])
+        def prepare(self, occluders, light, receiver_bounds, eps): ...
+        def classify(self, points, normals=None): ...   # bool (N,), True = in shadow
 
-``prepare`` builds the light-space structure for occluders ``mesh`` seen from ``light``, for receivers
-inside ``receiver_bounds`` ((2, 3) float64 box); ``classify`` takes (N, 3) float64 points (and unit
-normals) inside those bounds and returns a bool (N,) mask, True = in shadow, with the meaning of
-``../shared/DESIGN.md``: the segment from the point (moved ``eps`` along its normal when normals are
-given) to the light hits a triangle further than ``eps`` from the point; a normal facing away from the
-light (``dot <= 0``) is in shadow.
+``classify`` takes what :func:`shadowcl.points.check_points` accepts (and a checked ``Points``, at no
+cost) and answers with the meaning of ``../shared/DESIGN.md``: the segment from the point (moved
+``eps`` along its unit normal when normals are given) to the light hits a triangle further than
+``eps`` from the point; a normal facing away from the light (``dot <= 0``) is in shadow.
 
-Two optional parts of the protocol:
+Optional capabilities are declared on the class, never found by ``hasattr``:
 
-- ``scene_input = True`` on the class: ``prepare`` receives what the caller passed (a ``Scene``, or
-  any object with a ``.mesh``, e.g. a subdivision surface) instead of its triangle mesh, for methods
-  that work on more than triangles.
-- ``classify_view(view, zbuffer, seen)``: :func:`shadowcl.render` calls it, when present, instead of
-  ``classify`` with the camera's ``View``, its ``raster.ZBuffer`` and ``raster.Receivers``; it returns the
-  bool mask of the covered pixels in ``seen``'s order, for methods that work in image space (a
-  stencil, scan-line runs).
-- ``render_report(scene, width, height, device=, eps=, **params)`` (a static method):
-  :func:`shadowcl.render` hands the whole image to it, for methods that draw their own geometry (the
-  voxel method's crack-free leaves, shaded 1/2^n per shadowed corner).
+- ``scene_input``: ``prepare`` receives what the caller passed (a ``Scene``, or any object with a
+  ``.mesh``, e.g. a subdivision surface) instead of its triangle mesh.
+- ``image_space``: :meth:`Method.classify_view` answers the camera's covered pixels from the view, its
+  Z-buffer and receivers (a stencil, scan-line runs); the renderer calls it instead of ``classify``.
+- ``fractional``: :meth:`Method.visibility` gives values between 0 and 1 (a filter, 1/2^n shading).
+- ``own_renderer``: the method draws its own geometry (:meth:`Method.render_frame`).
+- ``bounded``: ``classify`` is right only inside the ``receiver_bounds`` given to ``prepare`` (a single
+  shadow-map view); :class:`shadowcl.Shadows` then answers points outside by a second preparation.
 """
 
 from __future__ import annotations
 
+import abc
 import importlib
 
 import numpy as np
 
-from .checks import check_bounds, finite_array, non_negative_float
-from .device import get_device
+from .checks import check_bounds
 from .geometry import Mesh, bounds_diagonal
 from .lights import check_light
 
@@ -53,7 +55,62 @@ METHODS = {
 EPS_FRACTION = 1e-4  # default eps as a fraction of the scene's bounding-box diagonal (DESIGN.md)
 
 
-def method_class(name: str):
+class Method(abc.ABC):
+    """The protocol (module docstring). Subclasses set :attr:`name` and :attr:`parameters`
+    (``{parameter: (default, description)}``, the only place a default is written) and implement
+    :meth:`prepare` and :meth:`classify`; ``stats`` is a dict of what the last calls measured."""
+
+    name: str = ""
+    parameters: dict[str, tuple] = {}
+    scene_input = False
+    image_space = False
+    fractional = False
+    own_renderer = False
+    bounded = False
+
+    def __init__(self, device, **params):
+        unknown = sorted(set(params) - set(self.parameters))
+        if unknown:
+            raise TypeError(f"{', '.join(unknown)}: not a parameter of method {self.name!r}; "
+                            f"it takes {sorted(self.parameters)}")
+        self.device = device
+        self.params = {key: params.get(key, default) for key, (default, _) in self.parameters.items()}
+        self.stats: dict = {}
+
+    @abc.abstractmethod
+    def prepare(self, occluders, light, receiver_bounds, eps: float) -> None:
+        """Build the structure for ``occluders`` (a :class:`Mesh`; the caller's object when
+        ``scene_input``) seen from ``light``, for receivers in the (2, 3) world box
+        ``receiver_bounds``; ``eps`` is DESIGN.md's absolute offset."""
+
+    @abc.abstractmethod
+    def classify(self, points, normals=None) -> np.ndarray:
+        """bool (N,): True = in shadow."""
+
+    def visibility(self, points, normals=None) -> np.ndarray:
+        """float32 (N,) in [0, 1], 1 = lit; binary methods give 0 or 1."""
+        return (~self.classify(points, normals)).astype(np.float32)
+
+    def classify_view(self, view, zbuffer, seen) -> np.ndarray:
+        """``image_space`` methods: the bool mask of ``seen``'s covered pixels (row-major order)."""
+        raise NotImplementedError(f"method {self.name!r} does not classify in image space")
+
+    @classmethod
+    def render_frame(cls, scene, view, prepared: list) -> "RenderResult":
+        """``own_renderer`` methods: the :class:`shadowcl.render.RenderResult` of ``scene`` through ``view``,
+        from ``prepared``, one prepared instance of the class per light (a Renderer's, kept between frames)."""
+        raise NotImplementedError(f"method {cls.name!r} has no renderer of its own")
+
+    def resolved_params(self) -> dict:
+        """The parameters as used by the last ``prepare``: what a None default became."""
+        return dict(self.params)
+
+    def __repr__(self) -> str:
+        changed = {k: v for k, v in self.params.items() if v is not self.parameters[k][0]}
+        return f"{type(self).__name__}({', '.join(f'{k}={v!r}' for k, v in changed.items())})"
+
+
+def method_class(name: str) -> type[Method]:
     if not isinstance(name, str):
         raise TypeError(f"method: expected a method name, got {type(name).__name__}")
     if name not in METHODS:
@@ -67,13 +124,11 @@ def methods() -> dict[str, dict[str, tuple]]:
     return {name: dict(method_class(name).parameters) for name in METHODS}
 
 
-def create_method(name: str, device=None, **params):
-    """An unprepared instance of method ``name`` on ``device``; unknown parameters raise ``TypeError``."""
-    cls = method_class(name)
-    unknown = sorted(set(params) - set(cls.parameters))
-    if unknown:
-        raise TypeError(f"{', '.join(unknown)}: not a parameter of method {name!r}; it takes {sorted(cls.parameters)}")
-    return cls(get_device(device), **params)
+def create_method(name: str, device=None, **params) -> Method:
+    """An unprepared instance of method ``name`` on ``device``; unknown parameters raise ``TypeError``.
+    For code inside the package and its tests; users call :func:`shadowcl.prepare`."""
+    from .device import get_device
+    return method_class(name)(get_device(device), **params)
 
 
 def with_receiver_count(name: str, params: dict, count: int) -> dict:
@@ -87,7 +142,7 @@ def with_receiver_count(name: str, params: dict, count: int) -> dict:
 def occluders(cls, scene_or_mesh):
     """What ``cls.prepare`` takes from ``scene_or_mesh``: the object itself for ``scene_input`` methods, else its mesh."""
     mesh = as_mesh(scene_or_mesh)
-    return scene_or_mesh if getattr(cls, "scene_input", False) else mesh
+    return scene_or_mesh if cls.scene_input else mesh
 
 
 def as_mesh(scene_or_mesh) -> Mesh:
@@ -113,37 +168,3 @@ def check_prepare(mesh, light, receiver_bounds, eps):
     if not (np.isfinite(eps) and eps >= 0):
         raise ValueError(f"eps: must be a finite non-negative distance, got {eps!r}")
     return light, box
-
-
-def check_points(points, normals) -> tuple[np.ndarray, np.ndarray | None]:
-    points = finite_array("points", points, (3,))
-    if normals is not None:
-        normals = finite_array("normals", normals, (3,))
-        if normals.shape != points.shape:
-            raise ValueError(f"normals: expected shape {points.shape} to match points, got {normals.shape}")
-        length = np.linalg.norm(normals, axis=1, keepdims=True)
-        if np.any(length == 0):
-            raise ValueError(f"normals: zero-length normal at index {int(np.argmin(length[:, 0]))}")
-        normals = normals / length
-    return points, normals
-
-
-def shadow_mask(scene_or_mesh, light, points, normals=None, method: str = "exact", device=None, eps=None, **params):
-    """Which of ``points`` are in shadow: bool (N,), True = in shadow.
-
-    ``scene_or_mesh`` holds the occluders, ``light`` is a :class:`PointLight` or
-    :class:`DirectionalLight`, ``points`` is (N, 3) and ``normals`` optionally (N, 3). ``eps`` is
-    absolute when given, else 1e-4 of the scene's bounding-box diagonal. ``method`` names one of
-    :func:`methods`; ``params`` are that method's parameters.
-    """
-    mesh = as_mesh(scene_or_mesh)
-    light = check_light(light)
-    points, normals = check_points(points, normals)
-    bounds = mesh.bounds
-    eps = default_eps(bounds) if eps is None else non_negative_float("eps", eps)
-    instance = create_method(method, device, **with_receiver_count(method, params, len(points)))
-    if len(points) == 0:
-        return np.zeros(0, dtype=bool)
-    receiver_bounds = np.stack([points.min(axis=0), points.max(axis=0)])
-    instance.prepare(occluders(type(instance), scene_or_mesh), light, receiver_bounds, eps)
-    return instance.classify(points, normals)

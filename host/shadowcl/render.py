@@ -19,8 +19,12 @@ from . import raster
 from .checks import non_negative_float, positive_int
 from .device import get_device
 from .geometry import bounds_diagonal
-from .methods import create_method, default_eps, method_class, occluders, with_receiver_count
+from .lights import check_light, same_light
+from .methods import default_eps, method_class, with_receiver_count
+from .points import check_points
 from .scene import Scene
+from .shadows import Shadows
+from .views import Camera
 
 AMBIENT = 0.18
 BACKGROUND_TOP = np.array([0.60, 0.70, 0.85])
@@ -38,6 +42,7 @@ class RenderResult:
     shadow: np.ndarray  # (L, M) bool: per light, per covered pixel in row-major order
     visibility: np.ndarray  # (L, M) float32 in [0, 1], what shading used (1 - shadow for boolean methods)
     timings: dict[str, float] = field(default_factory=dict)  # seconds per stage
+    reused: dict = field(default_factory=dict)  # what a Renderer kept from its last frame (see Renderer)
 
     @property
     def covered(self) -> np.ndarray:
@@ -64,69 +69,142 @@ def render_size(scene, width, height) -> tuple[int, int]:
     return width, height
 
 
-def camera_view(scene, width: int, height: int):
-    """The scene camera's view; the near plane at 1e-3 of the scene's size (reversed Z keeps depth precise)."""
-    return scene.camera.view(width, height, near=1e-3 * bounds_diagonal(scene.bounds))
+def camera_view(scene, width: int, height: int, camera=None):
+    """The view of ``camera`` (the scene's by default); the near plane at 1e-3 of the scene's size
+    (reversed Z keeps depth precise)."""
+    camera = scene.camera if camera is None else camera
+    return camera.view(width, height, near=1e-3 * bounds_diagonal(scene.bounds))
+
+
+class Renderer:
+    """Renders ``scene``'s camera view with shadows by ``method``, keeping its prepared methods between frames.
+
+    One method instance per light slot lives as long as the renderer: :meth:`render` prepares a slot
+    again only when its light changed (on the same instance, so silhouette tracking has the last frame),
+    and a frame whose camera is unchanged reuses the camera's Z-buffer and receivers. So a moving light
+    re-prepares and reclassifies, a moving camera only reclassifies (the voxel frame buffer, the angular
+    table of an unchanged view and the exact lists are kept). ``report`` is the last frame's
+    :class:`RenderResult`; its ``reused`` says what was kept: ``camera`` (bool) and ``prepared`` (one
+    bool per light).
+
+    ``width`` x ``height`` default to the scene's ``[render]`` size, else 960 x 540; ``eps`` and
+    ``params`` go to the method (:func:`shadowcl.methods`); ``post_filter`` (pixels) box-filters each
+    light's visibility over a (2k + 1)^2 window of covered pixels before shading (``shadow`` stays the
+    method's own mask); ``progress``, if given, is called with the name of each stage as it starts.
+    """
+
+    def __init__(self, scene, method: str = "exact", width=None, height=None, device=None, eps=None,
+                 post_filter: int = 0, progress=None, **params):
+        if not isinstance(scene, Scene):
+            raise TypeError(f"scene: expected a shadowcl.Scene, got {type(scene).__name__}")
+        self.scene = scene
+        self.method_class = method_class(method)
+        self.method = self.method_class.name
+        self.width, self.height = render_size(scene, width, height)
+        self.post_filter = positive_int("post_filter", post_filter, minimum=0, maximum=MAX_SIDE)
+        if self.post_filter and self.method_class.own_renderer:
+            raise ValueError(f"post_filter: method {method!r} renders its own geometry and has no post-filter")
+        self.eps = default_eps(scene.bounds) if eps is None else non_negative_float("eps", eps)
+        self.device = get_device(device)
+        self.method_class(self.device, **params)          # bad parameters raise here, not at the first frame
+        self._params = params
+        self._progress = progress
+        self._slots: list[Shadows] = []
+        self._camera = None                               # (view, zbuffer, seen, receiver points) of the last camera
+        self.report: RenderResult | None = None
+
+    def __repr__(self) -> str:
+        return f"Renderer({self.scene.name!r}, method={self.method!r}, {self.width}x{self.height})"
+
+    def render(self, light=None, camera=None) -> np.ndarray:
+        """The (H, W, 3) uint8 image under ``light`` (a light or a list of lights; None: the scene's)
+        through ``camera`` (a :class:`Camera`; None: the scene's)."""
+        lights = self.scene.lights if light is None else (list(light) if isinstance(light, (list, tuple)) else [light])
+        if not lights:
+            raise ValueError("light: expected a light or a non-empty list of lights")
+        lights = [check_light(one) for one in lights]
+        if camera is not None and not isinstance(camera, Camera):
+            raise TypeError(f"camera: expected a shadowcl.Camera or None, got {type(camera).__name__}")
+        timings: dict[str, float] = {}
+
+        def stage(name):
+            return _timed(timings, name, self._progress)
+
+        view = camera_view(self.scene, self.width, self.height, camera)
+        own = self.method_class.own_renderer
+        reused_camera = self._camera is not None and _same_view(self._camera[0], view)
+        if not (own or reused_camera):
+            with stage("raster"):
+                zbuffer = raster.rasterize(self.device, self.scene.mesh, view)
+            with stage("receivers"):
+                seen = raster.receivers(self.device, self.scene.mesh, view, zbuffer)
+                points = check_points(seen.points, seen.normals)
+            self._camera = (view, zbuffer, seen, points)
+        prepared = [self._prepare_slot(index, one, stage) for index, one in enumerate(lights)]
+        slots = self._slots[:len(lights)]
+        if own:
+            result = self.method_class.render_frame(self.scene, view, [slot._instance for slot in slots])
+            result.timings = {**timings, **result.timings}
+        else:
+            _, zbuffer, seen, points = self._camera
+            shadow = np.zeros((len(lights), len(points)), dtype=bool)
+            visibility = np.ones(shadow.shape, dtype=np.float32)
+            for index, slot in enumerate(slots):
+                instance = slot._instance
+                with stage("classify"):
+                    if instance.image_space:
+                        shadow[index] = instance.classify_view(view, zbuffer, seen)
+                        visibility[index] = ~shadow[index]
+                    elif instance.fractional:
+                        visibility[index] = instance.visibility(points)
+                        shadow[index] = visibility[index] < 0.5
+                    else:
+                        shadow[index] = instance.classify(points)
+                        visibility[index] = ~shadow[index]
+            with stage("shading"):
+                if self.post_filter:
+                    visibility = np.stack([_box_filter(seen, v, self.post_filter) for v in visibility])
+                image = shade(self.scene.triangle_colors, lights, view, seen, visibility)
+            result = RenderResult(image=image, receivers=seen, shadow=shadow, visibility=visibility, timings=timings)
+        result.reused = {"camera": bool(reused_camera and not own),
+                         "prepared": [not fresh for fresh in prepared]}
+        self.report = result
+        return result.image
+
+    def _prepare_slot(self, index: int, light, stage) -> bool:
+        """Make slot ``index`` ready for ``light``; True when it had to (re)prepare."""
+        if index < len(self._slots) and same_light(self._slots[index].light, light):
+            return False
+        with stage("prepare"):
+            if index < len(self._slots):
+                self._slots[index]._prepare(light)
+            else:
+                count = self.width * self.height if self._camera is None else len(self._camera[3])
+                params = with_receiver_count(self.method, self._params, count)   # sized by the first frame
+                self._slots.append(Shadows(self.scene, light, self.method, self.scene.bounds, self.device, self.eps,
+                                           **params))
+        return True
+
+
+def _same_view(a, b) -> bool:
+    return a.width == b.width and a.height == b.height and np.array_equal(a.origin, b.origin) \
+        and np.array_equal(a.matrix, b.matrix)
 
 
 def render_report(scene, method: str = "exact", width=None, height=None, device=None, eps=None, progress=None,
                   post_filter: int = 0, **params) -> RenderResult:
-    """Render ``scene`` and return the image with masks and stage timings (see :func:`render`).
-
-    ``progress``, if given, is called with the name of each stage as it starts. ``post_filter``
-    (pixels) box-filters each light's visibility over a (2k + 1)^2 window of covered pixels before
-    shading; ``shadow`` stays the method's own mask.
-    """
-    if not isinstance(scene, Scene):
-        raise TypeError(f"scene: expected a shadowcl.Scene, got {type(scene).__name__}")
-    post_filter = positive_int("post_filter", post_filter, minimum=0, maximum=MAX_SIDE)
-    own_renderer = getattr(method_class(method), "render_report", None)
-    if own_renderer is not None:   # a method that draws its own geometry (the voxel method's leaves)
-        if post_filter:
-            raise ValueError(f"post_filter: method {method!r} renders its own geometry and has no post-filter")
-        return own_renderer(scene, width, height, device=device, eps=eps, **params)
-    device = get_device(device)
-    width, height = render_size(scene, width, height)
-    timings: dict[str, float] = {}
-    mesh = scene.mesh
-    eps = default_eps(scene.bounds) if eps is None else non_negative_float("eps", eps)
-    view = camera_view(scene, width, height)
-    def stage(name):
-        return _timed(timings, name, progress)
-
-    with stage("raster"):
-        zbuffer = raster.rasterize(device, mesh, view)
-    with stage("receivers"):
-        seen = raster.receivers(device, mesh, view, zbuffer)
-    shadow = np.zeros((len(scene.lights), len(seen.points)), dtype=bool)
-    visibility = np.ones(shadow.shape, dtype=np.float32)
-    for index, light in enumerate(scene.lights):
-        shadower = create_method(method, device, **with_receiver_count(method, params, len(seen.points)))
-        with stage("prepare"):
-            shadower.prepare(occluders(type(shadower), scene), light, scene.bounds, eps)
-        with stage("classify"):
-            if hasattr(shadower, "classify_view"):
-                shadow[index] = shadower.classify_view(view, zbuffer, seen)
-                visibility[index] = ~shadow[index]
-            elif hasattr(shadower, "visibility"):
-                visibility[index] = shadower.visibility(seen.points, seen.normals)
-                shadow[index] = visibility[index] < 0.5
-            else:
-                shadow[index] = shadower.classify(seen.points, seen.normals)
-                visibility[index] = ~shadow[index]
-    with stage("shading"):
-        if post_filter:
-            visibility = np.stack([_box_filter(seen, v, post_filter) for v in visibility])
-        image = shade(scene.triangle_colors, scene.lights, view, seen, visibility)
-    return RenderResult(image=image, receivers=seen, shadow=shadow, visibility=visibility, timings=timings)
+    """One frame of a :class:`Renderer` of ``scene``: the image with masks and stage timings."""
+    renderer = Renderer(scene, method, width, height, device, eps, post_filter, progress, **params)
+    renderer.render()
+    return renderer.report
 
 
 def render(scene, method: str = "exact", width=None, height=None, device=None, eps=None, **params) -> np.ndarray:
-    """The camera's view of ``scene`` as an (H, W, 3) uint8 image with shadows by ``method``.
+    """The camera's view of ``scene`` as an (H, W, 3) uint8 image with shadows by ``method``: one frame
+    of a :class:`Renderer` (which see for the arguments).
 
-    ``width`` x ``height`` default to the scene's ``[render]`` size, else 960 x 540. Every light of
-    the scene contributes Lambert shading where the method says it is not shadowed; ambient light is
-    everywhere. ``eps`` and ``params`` go to the method (see :func:`shadowcl.methods`).
+    Every light of the scene contributes Lambert shading where the method says it is not shadowed;
+    ambient light is everywhere.
     """
     return render_report(scene, method, width, height, device, eps, **params).image
 

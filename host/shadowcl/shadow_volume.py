@@ -92,11 +92,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import raster
-from .checks import check_bounds, non_negative_float
+from .checks import check_bounds, choice, non_negative_float
 from .exact import ExactMethod
 from .geometry import Mesh, bounds_diagonal
 from .lights import PointLight, check_light
-from .methods import check_points, check_prepare
+from .methods import Method, check_prepare
+from .points import check_points
 from .silhouette import TRACKER_METHODS, Silhouette, SilhouetteTracker, edge_adjacency, silhouette_edges
 
 STENCILS = ("zfail", "zpass")
@@ -330,15 +331,19 @@ def _missing_silhouettes(silhouette: Silhouette) -> int:
     return int(np.count_nonzero(facing[faces[:, 0]] != lit_second)) - len(silhouette.indices)
 
 
-class ShadowVolumeMethod:
+class ShadowVolumeMethod(Method):
     """Shadow volumes: closed volumes from silhouette edges, a stencil for render, a per-point count for
-    shadow_mask (see the module doc). One silhouette tracker is kept across :meth:`prepare` calls on
-    the same occluder mesh, so ``"tracking"`` and ``"random"`` use the last frame's silhouette.
-    After prepare: ``volume`` (:class:`Volume`), ``tracked_silhouette`` (the tracker's own answer, before
-    any brute-force completion: what a recall measurement wants), ``stats`` (occluder and volume sizes,
+    shadow_mask (see the module doc). ``prepare`` only readies the occluders (LOD level, two-sided copy,
+    light-inside test); the silhouette and the volume are built on the first :meth:`classify_view` of a
+    frame, the point query's cap lists on the first :meth:`classify`: a caller who queries points never
+    pays for a volume. One silhouette tracker is kept across :meth:`prepare` calls on the same occluder
+    mesh, so ``"tracking"`` and ``"random"`` use the last frame's silhouette. After classify_view:
+    ``volume`` (:class:`Volume`), ``tracked_silhouette`` (the tracker's own answer, before any brute-force
+    completion: what a recall measurement wants); ``stats`` (occluder and volume sizes,
     ``silhouettes_missed``, stage times)."""
 
     name = "shadow_volume"
+    image_space = True
     parameters = {
         "lod": (None, "occluder level of detail: None (full mesh), a level index of shadowcl.lod.levels, or 'auto' "
                       "(the coarsest level within max_error, measured against the exact method)"),
@@ -349,28 +354,24 @@ class ShadowVolumeMethod:
                              "(refused when the near plane cuts a volume face)"),
     }
 
-    def __init__(self, device, lod=None, silhouettes="brute", max_error=0.001, stencil="zfail"):
-        self.device = device
+    def __init__(self, device, **params):
+        super().__init__(device, **params)
+        p = self.params
+        lod = p["lod"]
         if lod is not None and not (lod == "auto" if isinstance(lod, str) else
                                     isinstance(lod, (int, np.integer)) and not isinstance(lod, bool)):
             raise TypeError(f"lod: expected None, a level index (int) or 'auto', got {lod!r}")
-        if silhouettes not in TRACKER_METHODS:
-            raise ValueError(f"silhouettes: expected one of {TRACKER_METHODS}, got {silhouettes!r}")
-        if stencil not in STENCILS:
-            raise ValueError(f"stencil: expected one of {STENCILS}, got {stencil!r}")
-        self.lod, self.silhouettes, self.stencil = lod, silhouettes, stencil
-        self.max_error = non_negative_float("max_error", max_error)
+        self.lod = lod
+        self.silhouettes = choice("silhouettes", p["silhouettes"], TRACKER_METHODS)
+        self.stencil = choice("stencil", p["stencil"], STENCILS)
+        self.max_error = non_negative_float("max_error", p["max_error"])
         self._tracker: SilhouetteTracker | None = None
         self._tracked: Mesh | None = None
         self._prepared = False
-        self.stats: dict = {}
-
-    def __repr__(self) -> str:
-        return f"ShadowVolumeMethod(lod={self.lod!r}, silhouettes={self.silhouettes!r}, stencil={self.stencil!r})"
 
     def prepare(self, mesh: Mesh, light, receiver_bounds, eps: float) -> None:
-        """Build the shadow volume of ``mesh`` (or its LOD level) seen from ``light`` for receivers in
-        ``receiver_bounds``; ``eps`` is the absolute offset of DESIGN.md."""
+        """Ready the occluders ``mesh`` (or its LOD level) for ``light`` and receivers in ``receiver_bounds``;
+        ``eps`` is the absolute offset of DESIGN.md. The volume itself waits for :meth:`classify_view`."""
         light, box = check_prepare(mesh, light, receiver_bounds, eps)
         t0 = time.perf_counter()
         if self.lod is None:
@@ -383,54 +384,76 @@ class ShadowVolumeMethod:
         inside = isinstance(light, PointLight) and _light_inside_closed(prepared, light.position)
         if inside:
             prepared = two_sided(occluders, everywhere=True)
-        doubled = prepared.mesh
-        if self._tracked is not doubled:                  # one tracker per occluder mesh, kept across frames
-            self._tracker = SilhouetteTracker(self.device, doubled, method=self.silhouettes)
-            self._tracked = doubled
-        silhouette = self.tracked_silhouette = self._tracker.update(light)
-        missed = _missing_silhouettes(silhouette)
-        if missed:      # the volume would not close: a silent wrong shadow; redo the frame by brute force
-            silhouette = silhouette_edges(self.device, silhouette.adjacency, light)
-        t2 = time.perf_counter()
-        self.volume = build_volume(doubled, silhouette, light, box)
-        t3 = time.perf_counter()
-        self.mesh, self.occluders, self.light, self.eps, self.bounds = mesh, doubled, light, float(eps), box
-        self._exact = None                                # the count's lists, built on first classify
+        self.mesh, self.occluders, self.light, self.eps, self.bounds = mesh, prepared.mesh, light, float(eps), box
+        self._volume = self._exact = None                 # built on first use (volume, classify)
         self._prepared = True
         self.stats = dict(
-            occluder_triangles=len(occluders.faces), two_sided_triangles=len(doubled.faces),
+            occluder_triangles=len(occluders.faces), two_sided_triangles=len(prepared.mesh.faces),
             detached_faces=len(prepared.detached_faces), light_inside_closed=inside,
-            cap_triangles=self.volume.cap_triangles, silhouette_edges=len(self.volume.silhouette),
-            volume_triangles=0 if self.volume.mesh is None else len(self.volume.mesh.faces),
-            tracker=dict(self._tracker.stats), silhouettes_missed=missed,
-            lod_s=t1 - t0, silhouette_s=t2 - t1, volume_s=t3 - t2,
-            prepare_s=t3 - t0)
+            lod_s=t1 - t0, prepare_s=time.perf_counter() - t0)
 
     def _require_prepared(self, what: str) -> None:
         if not self._prepared:
             raise RuntimeError(f"{what}: call prepare(mesh, light, receiver_bounds, eps) first")
 
+    @property
+    def volume(self) -> Volume:
+        """This frame's closed volume (:class:`Volume`), built on first use after each prepare."""
+        self._require_prepared("volume")
+        if self._volume is None:
+            self._volume = self._build_volume()
+        return self._volume
+
+    @property
+    def tracked_silhouette(self) -> Silhouette:
+        """The tracker's own silhouette of this frame, before any brute-force completion."""
+        self.volume
+        return self._tracked_silhouette
+
+    def _build_volume(self) -> Volume:
+        """This frame's silhouette (tracked or not) and closed volume."""
+        t0 = time.perf_counter()
+        if self._tracked is not self.occluders:           # one tracker per occluder mesh, kept across frames
+            self._tracker = SilhouetteTracker(self.device, self.occluders, method=self.silhouettes)
+            self._tracked = self.occluders
+        silhouette = self._tracked_silhouette = self._tracker.update(self.light)
+        missed = _missing_silhouettes(silhouette)
+        if missed:      # the volume would not close: a silent wrong shadow; redo the frame by brute force
+            silhouette = silhouette_edges(self.device, silhouette.adjacency, self.light)
+        t1 = time.perf_counter()
+        volume = build_volume(self.occluders, silhouette, self.light, self.bounds)
+        self.stats.update(
+            cap_triangles=volume.cap_triangles, silhouette_edges=len(volume.silhouette),
+            volume_triangles=0 if volume.mesh is None else len(volume.mesh.faces),
+            tracker=dict(self._tracker.stats), silhouettes_missed=missed,
+            silhouette_s=t1 - t0, volume_s=time.perf_counter() - t1)
+        return volume
+
     # shadow_mask: the per-point count ------------------------------------------------------------------
     def classify(self, points, normals=None) -> np.ndarray:
         """Bool (N,): True where the segment from the point (moved ``eps`` along its normal) to the light
-        crosses the front cap, i.e. the point is inside the volume, or the normal faces away."""
+        crosses the front cap, i.e. the point is inside the volume, or the normal faces away.
+
+        This is, by construction (module doc), the exact method run on the light-facing faces: equal to
+        the exact answer, not an approximation of it. No silhouette or volume is built for it."""
         self._require_prepared("classify")
         t0 = time.perf_counter()
-        if self.volume.mesh is None:                     # nothing faces the light: only the normal rule
-            return self._facing_away(*check_points(points, normals))
+        receivers = check_points(points, normals)
         if self._exact is None:
-            cap = Mesh(self.occluders.vertices, self.occluders.faces[self.volume.cap])
-            self._exact = ExactMethod(self.device, expected_receivers=len(points))
-            self._exact.prepare(cap, self.light, self.bounds, self.eps)
-        mask = self._exact.classify(points, normals)
-        self.stats.update(count_lists_s=self._exact.stats["prepare_s"], classify_s=time.perf_counter() - t0)
+            facing = silhouette_edges(self.device, edge_adjacency(self.occluders), self.light).facing
+            cap = np.flatnonzero(facing)
+            self.stats["cap_triangles"] = len(cap)
+            if len(cap):
+                self._exact = ExactMethod(self.device, expected_receivers=max(len(receivers), 1))
+                self._exact.prepare(Mesh(self.occluders.vertices, self.occluders.faces[cap]), self.light,
+                                    self.bounds, self.eps)
+                self.stats.update(count_lists_s=self._exact.stats["prepare_s"],
+                                  device_bytes=self._exact.stats["device_bytes"])
+            else:
+                self._exact = False                       # nothing faces the light: only the normal rule
+        mask = self._exact.classify(receivers) if self._exact else receivers.facing_away(self.light)
+        self.stats.update(classify_s=time.perf_counter() - t0)
         return mask
-
-    def _facing_away(self, points: np.ndarray, normals) -> np.ndarray:
-        if normals is None:
-            return np.zeros(len(points), dtype=bool)
-        to_light = self.light.direction_to_light(points)
-        return np.einsum("ij,ij->i", np.asarray(normals, dtype=np.float64), to_light) <= 0
 
     # render: the camera-view stencil ---------------------------------------------------------------------
     def classify_view(self, view, zbuffer, seen) -> np.ndarray:
@@ -440,7 +463,7 @@ class ShadowVolumeMethod:
         that miss it): the truncated volume would leave it lit whatever it should be."""
         self._require_prepared("classify_view")
         t0 = time.perf_counter()
-        shadow = self._facing_away(seen.points, seen.normals)
+        shadow = check_points(seen.points, seen.normals).facing_away(self.light)
         if self.volume.mesh is not None:
             if not self.volume.reaches(self.light, seen.points):
                 raise ValueError("seen: pixels lie beyond the shadow volume's far cap (outside the receiver_bounds "

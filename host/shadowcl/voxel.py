@@ -62,9 +62,10 @@ import pyopencl as cl
 
 from . import lightspace
 from . import voxelize as vz
-from .checks import check_bounds, non_negative_float, positive_int
+from .checks import check_bounds, choice, optional_int
 from .lights import PointLight, check_light
-from .methods import check_points
+from .methods import Method
+from .points import check_points
 
 DETERMINATIONS = ("topology", "offset")
 DOT5_FLOATS = 16                 # kernels/ray_triangle.h
@@ -91,7 +92,7 @@ def scene_patches(device, scene_or_surface):
     return vz.patch_table_of(device, scene_or_surface)
 
 
-class VoxelMethod:
+class VoxelMethod(Method):
     """Lai & Cheng's voxel-based shadows (module docstring). After :meth:`prepare`, :attr:`stats` holds
     the voxelization (leaves, levels, subpatches, bytes), list entries and each stage's time in seconds
     (``lists_s``: the light-space lists for topology, the depth plane for offset); :attr:`vox` is the
@@ -101,6 +102,8 @@ class VoxelMethod:
 
     name = "voxel"
     scene_input = True
+    fractional = True
+    own_renderer = True
     parameters = {
         "resolution": (None, "voxels per side of the cubic frame buffer (<= 1024); None: 256 across the "
                              "receivers' box, clamped to 64..1024"),
@@ -113,33 +116,30 @@ class VoxelMethod:
                               "the control points' box"),
     }
 
-    def __init__(self, device, resolution=None, determination="topology", connectivity=26, frame_buffer=None,
-                 grid_bounds=None):
-        self.device = device
-        if resolution is not None:
-            resolution = positive_int("resolution", resolution, 1, vz.MAX_RESOLUTION)
-        if determination not in DETERMINATIONS:
-            raise ValueError(f"determination: expected one of {DETERMINATIONS}, got {determination!r}")
-        if connectivity not in vz.CONNECTIVITIES:
-            raise ValueError(f"connectivity: expected one of {vz.CONNECTIVITIES}, got {connectivity!r}")
-        if frame_buffer not in (None, True, False):
-            raise TypeError(f"frame_buffer: expected None, True or False, got {frame_buffer!r}")
-        self.resolution, self.determination = resolution, determination
-        self.connectivity, self.frame_buffer = connectivity, frame_buffer
-        self.grid_bounds = None if grid_bounds is None else check_bounds("grid_bounds", grid_bounds)
+    def __init__(self, device, **params):
+        super().__init__(device, **params)
+        p = self.params
+        self.resolution = optional_int("resolution", p["resolution"], 1, vz.MAX_RESOLUTION)
+        self.determination = choice("determination", p["determination"], DETERMINATIONS)
+        self.connectivity = choice("connectivity", p["connectivity"], vz.CONNECTIVITIES)
+        if p["frame_buffer"] not in (None, True, False):
+            raise TypeError(f"frame_buffer: expected None, True or False, got {p['frame_buffer']!r}")
+        self.frame_buffer = p["frame_buffer"]
+        self.grid_bounds = None if p["grid_bounds"] is None else check_bounds("grid_bounds", p["grid_bounds"])
         self._builder = lightspace.ListBuilder(device, corners=4)
         self._prepared = False
-        self.stats: dict = {}
 
-    def __repr__(self) -> str:
-        return (f"VoxelMethod(resolution={self.resolution}, determination={self.determination!r}, "
-                f"connectivity={self.connectivity})")
+    def resolved_params(self) -> dict:
+        params = dict(self.params)
+        if self._prepared:
+            params.update(resolution=self.resolution_used, frame_buffer=self.frame_buffer_used)
+        return params
 
     # prepare -------------------------------------------------------------------------------------------
-    @staticmethod
-    def render_report(scene, width=None, height=None, device=None, eps=None, **params):
-        """:func:`shadowcl.render` for this method: section 5's rendering of the leaves (:func:`render_leaves`)."""
-        return render_leaves(scene, width, height, device=device, eps=eps, **params)
+    @classmethod
+    def render_frame(cls, scene, view, prepared):
+        """Section 5's rendering of the leaves (:func:`render_leaves`) for a :class:`shadowcl.Renderer`."""
+        return render_leaves(scene, view, prepared)
 
     def prepare(self, scene_or_surface, light, receiver_bounds, eps: float) -> None:
         """Voxelize the subdivision surfaces of ``scene_or_surface`` (a Scene, a SubdivisionSurface or a
@@ -254,6 +254,12 @@ class VoxelMethod:
         self.vox, self.sample_states, self._normals_dev, self.grid = vox, sample_states, normals, grid
         self.stats.update(stats)
 
+    def leaf_mesh(self) -> vz.LeafMesh:
+        """The crack-free tessellation of this voxelization's leaves (made once per voxelization)."""
+        if getattr(self, "_leaf_mesh", None) is None or self._leaf_mesh[0] is not self.vox:
+            self._leaf_mesh = (self.vox, self.vox.tessellate())
+        return self._leaf_mesh[1]
+
     @property
     def sample_normals(self) -> np.ndarray:
         """(S, 3) float32 unit normals of the samples (leaf corners in order), read from the device."""
@@ -298,7 +304,8 @@ class VoxelMethod:
     def _begin_classify(self, points, normals):
         if not self._prepared:
             raise RuntimeError("voxel: classify before prepare")
-        points, normals = check_points(points, normals)
+        receivers = check_points(points, normals)
+        points = receivers.positions
         if not self.frame_buffer_used:
             self._run()                     # section 5.1: no frame buffer, so determine again
         ids, states = self._locate(points)
@@ -307,14 +314,7 @@ class VoxelMethod:
         if unplaced:
             warnings.warn(f"voxel: {unplaced} of {len(points)} points are more than {SEARCH} voxels from every "
                           "voxelized surface; they are classified lit", stacklevel=3)
-        backfacing = np.zeros(len(points), dtype=bool)
-        if normals is not None:
-            if isinstance(self.light, PointLight):
-                to_light = self.light.position - points
-            else:
-                to_light = -np.asarray(self.light.direction, dtype=np.float64)[None]
-            backfacing = np.einsum("ij,ij->i", normals, np.broadcast_to(to_light, points.shape)) <= 0
-        return ids, states, backfacing
+        return ids, states, receivers.facing_away(self.light)
 
     def classify(self, points, normals=None) -> np.ndarray:
         """bool (N,), True = in shadow: each point's voxel state (module docstring)."""
@@ -401,51 +401,37 @@ def shade_leaves(method: "VoxelMethod", leaves: vz.LeafMesh | None = None) -> Sh
     return ShadedLeaves(leaves, vertex_state, leaf_visibility(states)[leaves.face_leaf])
 
 
-def render_leaves(scene, width=None, height=None, device=None, eps=None, **params):
-    """Section 5's rendering of a subdivision-surface ``scene``: the voxelization's leaves tessellated
-    without cracks (:func:`shadowcl.voxelize.tessellate`), drawn with THE raster kernel, each leaf shaded
-    with ambient + 1/2^n of its Lambert reflection per light for n shadowed corner voxels (no highlight).
-    ``params`` go to :class:`VoxelMethod`. Returns a :class:`shadowcl.render.RenderResult` whose
+def render_leaves(scene, view, prepared: list) -> "RenderResult":
+    """Section 5's rendering of a subdivision-surface ``scene`` through ``view``: the voxelization's leaves
+    tessellated without cracks (:func:`shadowcl.voxelize.tessellate`), drawn with THE raster kernel, each
+    leaf shaded with ambient + 1/2^n of its Lambert reflection per light for n shadowed corner voxels (no
+    highlight). ``prepared``: one prepared :class:`VoxelMethod` per light (a :class:`shadowcl.Renderer`'s:
+    ``render(scene, method="voxel")`` comes here). Returns a :class:`shadowcl.render.RenderResult` whose
     ``receivers`` are the leaf mesh's pixels (``triangle`` indexes the leaf mesh) and ``shadow`` is
-    visibility < 1/2, as in render_report."""
+    visibility < 1/2."""
     from . import raster
-    from .render import RenderResult, camera_view, render_size, shade
-    from .device import get_device
-    from .methods import default_eps
-    from .scene import Scene
+    from .render import RenderResult, shade
 
-    if not isinstance(scene, Scene):
-        raise TypeError(f"scene: expected a shadowcl.Scene, got {type(scene).__name__}")
-    device = get_device(device)
-    width, height = render_size(scene, width, height)
-    eps = default_eps(scene.bounds) if eps is None else non_negative_float("eps", eps)
-    view = camera_view(scene, width, height)
     timings: dict = {}
     shaded, leaves = [], None
-    for light in scene.lights:
-        t0 = time.perf_counter()
-        method = VoxelMethod(device, **params)
-        method.prepare(scene, light, scene.bounds, eps)
-        t1 = time.perf_counter()
+    t0 = time.perf_counter()
+    for method in prepared:
         # the voxelization does not depend on the light: tessellate once unless it changed
         if leaves is None or not np.array_equal(method.vox.leaves, leaves.leaves):
-            leaves = method.vox.tessellate()
+            leaves = method.leaf_mesh()
         shaded.append(shade_leaves(method, leaves))
-        t2 = time.perf_counter()
-        timings["prepare"] = timings.get("prepare", 0.0) + t1 - t0
-        timings["tessellate"] = timings.get("tessellate", 0.0) + t2 - t1
-    t0 = time.perf_counter()
-    zbuffer = raster.rasterize(device, leaves.mesh, view)
-    seen = raster.receivers(device, leaves.mesh, view, zbuffer)
     t1 = time.perf_counter()
+    zbuffer = raster.rasterize(method.device, leaves.mesh, view)
+    seen = raster.receivers(method.device, leaves.mesh, view, zbuffer)
+    t2 = time.perf_counter()
     visibility = np.stack([s.face_visibility[seen.triangle] for s in shaded]).astype(np.float32)
     # colour of each triangle: its leaf's patch -> the surface (tables are merged in scene.surfaces order)
-    counts = [len(surface.patch_table(device).first) for _, surface in scene.surfaces]
+    counts = [len(surface.patch_table(method.device).first) for _, surface in scene.surfaces]
     names = [name for name, _ in scene.objects]
     object_of_patch = np.repeat([names.index(name) for name, _ in scene.surfaces], counts)
     colors = scene.colors[object_of_patch[method.vox.patch[leaves.face_leaf]]]
-    image = shade(colors, scene.lights, view, seen, visibility)
-    timings.update(raster=t1 - t0, shading=time.perf_counter() - t1)
+    image = shade(colors, [method.light for method in prepared], view, seen, visibility)
+    timings.update(tessellate=t1 - t0, raster=t2 - t1, shading=time.perf_counter() - t2)
     return RenderResult(image=image, receivers=seen, shadow=visibility < 0.5, visibility=visibility,
                         timings=timings)
 

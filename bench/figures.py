@@ -1,0 +1,223 @@
+"""README's figures, generated from the committed bench results, never typed.
+
+    python bench/figures.py           # rewrite README.md's generated blocks from bench/results/*.json
+    python bench/figures.py --check   # exit 1 (and say which block) when README.md is out of date
+
+A generated block is the text between ``<!-- figures: NAME -->`` and ``<!-- /figures -->`` in
+README.md; :data:`BLOCKS` maps NAME to the function that writes it. Every number in a block comes from
+a JSON file in bench/results, named beside it; prose is static text here. The exact/Embree figures
+come from the newest full ``run-*.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import sys
+from pathlib import Path
+
+from report import time_of
+
+BENCH = Path(__file__).resolve().parent
+RESULTS = BENCH / "results"
+README = BENCH.parent / "README.md"
+MODELS = ("bunny", "ogre", "teapot")
+
+
+def load(name: str) -> dict:
+    return json.loads((RESULTS / name).read_text())
+
+
+def newest_run(predicate=lambda doc: True) -> tuple[str, dict]:
+    """The newest full ``run-*.json`` (names sort by date) for which ``predicate(doc)`` holds."""
+    for path in sorted(RESULTS.glob("run-*.json"), reverse=True):
+        doc = json.loads(path.read_text())
+        if not doc["settings"].get("quick") and predicate(doc):
+            return path.name, doc
+    raise FileNotFoundError(f"no full run-*.json in {RESULTS} fits")
+
+
+def span(values, digits: int = 2, unit: str = "") -> str:
+    """``low–high`` (or one value) with ``digits`` significant digits."""
+    low, high = (f"{v:.{digits}g}" for v in (min(values), max(values)))
+    return f"{low}{unit}" if low == high else f"{low}–{high}{unit}"
+
+
+def count(n: int) -> str:
+    return f"{n / 1e6:.1f} M" if n >= 1e6 else f"{n / 1e3:.0f} k" if n >= 1e3 else str(n)
+
+
+def src(*names: str) -> str:
+    return " (" + ", ".join(f"`{n}`" for n in names) + ")"
+
+
+def exact_cells() -> tuple[str, str]:
+    name, run = newest_run(lambda d: "oneshot_s" in d["rows"][0])
+    rows = {(r["scene"], r["label"]): r for r in run["rows"]}
+    scenes = sorted({r["scene"] for r in run["rows"]}, key=lambda s: (s not in MODELS, s))
+    peers = [r for r in run["rows"] if r["method"] == "embreex"]
+    leaks = load("leaks.json")["rows"]
+    error = (f"the reference: {max(r['wrong'] for r in peers)} of {count(peers[0]['receivers'])} receivers differ "
+             f"from Embree on {', '.join(scenes)}{src(name)}; {sum(r['watertight_leaks'] for r in leaks)} leaks over "
+             f"{count(sum(r['rays'] for r in leaks))} rays aimed at shared edges and vertices (dot5: "
+             f"{span([r['dot5_leak_percent'] for r in leaks])} %){src('leaks.json')}")
+    exact = [rows[(s, "exact")] for s in scenes]
+    split = {r["label"]: r["vs_peer"] for r in load("exact-split-light-inside.json")["rows"]
+             if r["scene"] == "light_inside"}
+    speed = ("one-shot `shadow_mask`: " + ", ".join(f"{r['receivers_per_s'] / 1e6:.1f} M receivers/s on the {r['scene']}"
+                                                   for r in exact)
+             + f", {span([r['vs_peer'] for r in exact])}× Embree (embreex, fastest of 1 or 2 processes, prepare + "
+             f"classify) in the same run; `prepare` {span([1e3 * r['prepare_s'] for r in exact])} ms, `mask` "
+             f"{span([r['receivers_per_s_query'] / 1e6 for r in exact])} M receivers/s; "
+             f"{span([100 * r['host_share'] for r in exact])} % of the one-shot call's time on the host (outside "
+             f"OpenCL calls){src(name)}; `light_inside` {split['exact split=True']:.2f}× Embree (was "
+             f"{split['exact split=False']:.2f}× before large occluders were split){src('exact-split-light-inside.json')}")
+    return error, speed
+
+
+def shadow_map_cells() -> tuple[str, str]:
+    rows = load("shadow-map-defaults.json")["rows"]
+
+    def errors(resolution: int, filter_: str) -> str:
+        found = {r["scene"]: r["error_percent"] for r in rows
+                 if r["params"] == {"resolution": resolution, "bias": "normal", "filter": filter_}}
+        return " / ".join(f"{found[s]:.3f}" for s in MODELS) + " %"
+
+    error = (f"{' / '.join(MODELS)} at 2048 (default: normal offset, nearest): {errors(2048, 'nearest')}; 4096: "
+             f"{errors(4096, 'nearest')}; bilinear at 2048: {errors(2048, 'bilinear')}{src('shadow-map-defaults.json')}")
+    name, run = newest_run(lambda d: len(d["settings"]["sweep"].get("shadow_map", {}).get("resolution", [])) > 2)
+    by_case = {}
+    for r in run["rows"]:
+        by_case.setdefault((r["scene"], r["light"]), []).append(r)
+    parts = []
+    for resolution in run["settings"]["sweep"]["shadow_map"]["resolution"]:
+        ratios, errs = [], []
+        for (scene, _), group in by_case.items():
+            exact = next((r for r in group if r["method"] == "exact"), None)
+            mine = [r for r in group if r["method"] == "shadow_map" and r["params"].get("resolution") == resolution
+                    and r["params"].get("bias", "normal") == "normal" and r["params"].get("filter", "nearest") == "nearest"]
+            if scene in MODELS and exact and mine:
+                ratios.append(time_of(mine[0], "oneshot_s") / time_of(exact, "oneshot_s"))
+                errs.append(mine[0]["error_percent"])
+        if ratios:
+            parts.append(f"{resolution}: {span(ratios)}× ({span(errs)} %)")
+    speed = "time / exact's on the models (error): " + ", ".join(parts) + src(name)
+    return error, speed
+
+
+def voxel_cells() -> tuple[str, str]:
+    doc = load("voxel.json")
+    scenes = [s["scene"] for s in doc["scenes"]]
+
+    def rows(resolution, determination):
+        return [r for s in doc["scenes"] for r in s["rows"] if r["resolution"] == resolution
+                and r["determination"] == determination and r["connectivity"] == 26]
+
+    error = (f"256³, topology: {span([r['all']['percent'] for r in rows(256, 'topology')])} % on {', '.join(scenes)} "
+             f"(offset {span([r['all']['percent'] for r in rows(256, 'offset')])} %); 1024³: "
+             f"{span([r['all']['percent'] for r in rows(1024, 'topology')])} %{src('voxel.json')}")
+    speed = (f"{span([r['ratio_to_exact'] for r in rows(256, 'topology')])}× the exact method's time at 256³ (exact "
+             f"is fast on the tessellations); a second view of the same light from the frame buffer "
+             f"{span([s['second_view']['speedup'] for s in doc['scenes']])}× faster than recomputing{src('voxel.json')}")
+    return error, speed
+
+
+def shadow_volume_cells() -> tuple[str, str]:
+    rows = load("shadow_volume.json")["rows"]
+    masks = [r for r in rows if r["path"] == "shadow_mask"]
+    renders = [r for r in rows if r["path"].startswith("render") and "failed" not in r]
+    lod = load("lod.json")
+    bunny = next(s for s in lod["scenes"] if s["scene"] == "bunny")
+    auto = bunny["lights"][0]["auto"]
+    error = (f"`shadow_mask`: {max(r['differ'] for r in masks)} of {count(masks[0]['receivers'])} receivers differ "
+             f"from exact on {', '.join(r['scene'] for r in masks)}; `render` stencil: "
+             f"{span([r['fraction'] for r in renders])} of pixels, all within "
+             f"{max(r['max_silhouette_distance_px'] for r in renders):.1g} px of a silhouette (pixel ray vs "
+             f"eps-offset point){src('shadow_volume.json')}; `lod=\"auto\"` at {100 * lod['settings']['max_error']:g} %: "
+             f"bunny {count(auto['triangles'])} of {count(bunny['triangles'])} triangles, ≤ "
+             f"{max(light['auto']['bench_error']['percent'] for light in bunny['lights']):.2g} % over "
+             f"{len(bunny['lights'])} lights{src('lod.json')}")
+    fragments = load("stencil_profile.json")
+    speed = (f"`shadow_mask` {span([r['ratio'] for r in masks])}× exact's time; the stencil (z-fail, z-pass) "
+             f"{span([r['ratio'] for r in renders])}× exact's on the same pixels{src('shadow_volume.json')}; "
+             f"{fragments['fragments'] / 1e6:.1f} M fragments on the bunny (filling the long side quads)"
+             f"{src('stencil_profile.json')}")
+    return error, speed
+
+
+def angular_cells() -> tuple[str, str]:
+    doc = load("angular.json")
+    rows = [r for r in doc["speed_error"] if r["method"] == "angular"]
+    default = {r["scene"]: r for r in rows if r["params"] == "theta_resolution=None, table=faces"}
+    bunny = {r["params"]: r["error"] for r in rows if r["scene"] == "bunny"}
+    limits = (100, 300, 600)
+    error = (f"default rows (eq. 4): " + ", ".join(f"{s} {100 * default[s]['error']:.3f} %" for s in MODELS)
+             + f"; {' / '.join(map(str, limits))} rows on the bunny: "
+             + " / ".join(f"{100 * bunny[f'theta_resolution={n}, table=faces']:.2g}" for n in limits) + " %"
+             + src("angular.json"))
+    hard = [r for s, r in default.items() if s not in MODELS and r.get("vs_shadow_map") is not None]
+    lookup = doc["lookup_rate"]
+    speed = (f"{span([default[s]['vs_exact'] for s in MODELS])}× exact's time on the models; faster than the "
+             f"cheapest shadow map at least as accurate on {sum(r['vs_shadow_map'] < 1 for r in hard)} of {len(hard)} "
+             f"hard scenes; {lookup['us_per_lookup']:.2g} µs per lookup on {count(lookup['cubes'])} cubes (paper: "
+             f"~{lookup['paper_us_per_lookup']:g} µs){src('angular.json')}")
+    return error, speed
+
+
+METHOD_ROWS = [  # method, paper, status (static prose), and the function giving its two figure cells
+    ("`exact`", "Lai & Cheng 2007 §4.2 on the original triangles: light-space lists built on the device with atomics "
+     "(an irregular Z-buffer) + the watertight ray/triangle test of Woop et al. 2013 (`test=\"dot5\"`: the paper's "
+     "5-dot-product test)", "done", exact_cells),
+    ("`shadow_map`", "Williams 1978: light-view depth from the raster kernel, constant / slope / normal-offset bias, "
+     "nearest / bilinear / PCF, dither, post-filter", "done", shadow_map_cells),
+    ("`voxel`", "Lai & Cheng 2007: Catmull-Clark limit surfaces voxelized by breadth-first parameter-space subdivision "
+     "on the device into a 2-bit cubic frame buffer; topology-based (sorted subpatch lists on the light-space lists + "
+     "5-dot-product test) or offset-based determination; `render` draws the leaves tessellated crack-free (§5.3), "
+     "ambient + 1/2^n of the reflection for n shadowed corners", "done (subdivision-surface scenes only; triangle "
+     "objects are refused)", voxel_cells),
+    ("`shadow_volume`", "Fawad, Wang & Wu: silhouettes by brute force, tracking or the randomized method, LOD occluders "
+     "(`lod=None\\|level\\|\"auto\"`), volumes closed with caps; camera stencil (z-fail / z-pass) drawn by the raster "
+     "kernel in `render`, per-point cap count in `shadow_mask`", "done", shadow_volume_cells),
+    ("`angular`", "Thakur, Cheng & Miura: ridge-edge loops, span table per θ row built on the device: `table=\"loops\"` "
+     "the paper's (ridge-edge crossings paired by §4's rule, chord depth, creases in duplicate), `table=\"faces\"` "
+     "(default, same error, faster: one span per light-facing face, exact depth), binary-search lookups, scan-line "
+     "runs in `render`, several lights (`shadow_counts`), light inside", "done", angular_cells),
+]
+
+
+def methods_table() -> str:
+    lines = ["| method | paper | status | error vs exact | speed |", "|---|---|---|---|---|"]
+    for method, paper, status, cells in METHOD_ROWS:
+        lines.append(f"| {method} | {paper} | {status} | {' | '.join(cells())} |")
+    return "\n".join(lines)
+
+
+BLOCKS = {"methods-table": methods_table}
+BLOCK = re.compile(r"(<!-- figures: ([\w-]+) -->\n)(.*?)(<!-- /figures -->)", re.DOTALL)
+
+
+def regenerate(text: str) -> str:
+    """``text`` with every generated block rewritten; an unknown block name raises ``KeyError``."""
+    return BLOCK.sub(lambda m: m.group(1) + BLOCKS[m.group(2)]() + "\n" + m.group(4), text)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description="Regenerate README.md's figures from bench/results/*.json.")
+    parser.add_argument("--check", action="store_true", help="do not write; exit 1 if README.md is out of date")
+    args = parser.parse_args(argv)
+    text = README.read_text()
+    new = regenerate(text)
+    if args.check:
+        stale = [m.group(2) for m, n in zip(BLOCK.finditer(text), BLOCK.finditer(new)) if m.group(0) != n.group(0)]
+        if stale or not BLOCK.search(text):
+            print(f"README.md is out of date (blocks: {', '.join(stale) or 'none found'}); run python bench/figures.py",
+                  file=sys.stderr)
+            return 1
+        return 0
+    README.write_text(new)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,140 @@
+"""The one check of receivers: what every method and every entry point accepts as points and normals.
+
+:func:`check_points` turns the caller's ``points`` (and optional ``normals``) into :class:`Points` once;
+every method's ``classify`` and ``visibility`` calls it, and passing a :class:`Points` back in costs
+nothing, so a point set is checked once however many layers it goes through (``shadow_mask`` ->
+``Shadows.mask`` -> the method).
+
+The contract: ``points`` is (N, 3) of real numbers, all finite and inside float32's range (the
+device's precision); ``normals`` is None or the same shape, finite, each of non-zero length. Normals
+need not be unit: every method uses them as directions (:meth:`Points.unit_normals`, or normalised on
+the device in double). A zero normal is refused with its index, never read as "facing away".
+
+Cheap by construction, since it runs on every public call: the bounds come from column-wise
+reductions (a row-wise ``min(axis=0)`` over a (N, 3) array is ~6x slower), and finiteness is read off
+them (NaN propagates through ``min``, inf is a bound); the normals' squared lengths, computed column by
+column, give both their finiteness and the zero check. The slow search for the first bad index runs
+only when a check fails. At 1.2 M receivers: ~6 ms for the points, ~7 ms more with normals.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+BOUNDS_SLACK = 1e-6   # relative to a box's diagonal: a point this close outside the box counts as inside
+
+
+@dataclass(frozen=True, eq=False)
+class Points:
+    """Receivers that passed :func:`check_points`.
+
+    ``positions`` (N, 3) float64 C-contiguous; ``normals`` None or (N, 3) float64 C-contiguous, as given
+    (finite, non-zero length); ``bounds`` the (2, 3) box of the positions (zeros when N = 0).
+    """
+
+    positions: np.ndarray
+    normals: np.ndarray | None
+    bounds: np.ndarray
+    _length2: np.ndarray | None = field(default=None, repr=False)   # squared normal lengths, for unit_normals
+    _unit: list = field(default_factory=list, repr=False)            # cache of unit_normals()
+
+    def __len__(self) -> int:
+        return len(self.positions)
+
+    def unit_normals(self) -> np.ndarray | None:
+        """(N, 3) float64 unit normals (computed once), or None without normals."""
+        if self.normals is None:
+            return None
+        if not self._unit:
+            self._unit.append(self.normals / np.sqrt(self._length2)[:, None])
+        return self._unit[0]
+
+    def facing_away(self, light) -> np.ndarray:
+        """bool (N,): the normal faces away from ``light`` (``dot <= 0``, DESIGN.md's "in shadow");
+        all False without normals."""
+        if self.normals is None:
+            return np.zeros(len(self), dtype=bool)
+        to_light = light.direction_to_light(self.positions)
+        return np.einsum("ij,ij->i", self.normals, to_light) <= 0
+
+    def subset(self, index) -> "Points":
+        """The receivers at ``index`` (an integer array or a bool mask), checked already."""
+        positions = np.ascontiguousarray(self.positions[index])
+        normals = None if self.normals is None else np.ascontiguousarray(self.normals[index])
+        length2 = None if self._length2 is None else self._length2[index]
+        return Points(positions, normals, _bounds(positions), length2)
+
+
+def check_points(points, normals=None) -> Points:
+    """``points`` (N, 3) and optional ``normals`` (N, 3) checked once (module docstring), as :class:`Points`.
+
+    A :class:`Points` is returned as it is (``normals`` must then be None). Raises ``TypeError`` for
+    non-numeric input and ``ValueError`` naming the argument and the first bad index otherwise.
+    """
+    if isinstance(points, Points):
+        if normals is not None:
+            raise TypeError("normals: the points are checked Points already, which carry their own normals")
+        return points
+    positions = _real_array("points", points)
+    bounds = _bounds(positions)
+    if not np.all(np.isfinite(bounds)):
+        raise ValueError(f"points: contains NaN or inf (first at index {_first_bad_row(positions)})")
+    largest = float(np.abs(bounds).max(initial=0.0))
+    if largest >= FLOAT32_MAX:
+        raise ValueError(f"points: coordinates overflow float32 (largest magnitude {largest:.3g})")
+    if normals is None:
+        return Points(positions, None, bounds)
+    normals = _real_array("normals", normals)
+    if normals.shape != positions.shape:
+        raise ValueError(f"normals: expected shape {positions.shape} to match points, got {normals.shape}")
+    length2 = _squared_lengths(normals)
+    if len(length2) and not (length2.min() > 0 and np.isfinite(length2.max())):
+        normals, length2 = _bad_normals(normals, length2)
+    return Points(positions, normals, bounds, length2)
+
+
+def _real_array(name: str, value) -> np.ndarray:
+    """``value`` as an (N, 3) C-contiguous float64 array (no copy when it is one already)."""
+    try:
+        array = np.asarray(value)
+    except Exception as error:  # ragged lists and the like
+        raise TypeError(f"{name}: cannot be read as an array ({error})") from None
+    if array.dtype == object or not (np.issubdtype(array.dtype, np.number) or array.dtype == bool) \
+            or np.issubdtype(array.dtype, np.complexfloating):
+        raise TypeError(f"{name}: expected a real numeric array, got dtype {array.dtype}")
+    if array.ndim != 2 or array.shape[1] != 3:
+        raise ValueError(f"{name}: expected shape (N, 3), got {array.shape}")
+    return np.ascontiguousarray(array, dtype=np.float64)
+
+
+def _bounds(positions: np.ndarray) -> np.ndarray:
+    """(2, 3) float64 box, column by column (NaN and inf propagate into it)."""
+    if len(positions) == 0:
+        return np.zeros((2, 3))
+    return np.array([[column.min() for column in positions.T], [column.max() for column in positions.T]])
+
+
+def _first_bad_row(array: np.ndarray) -> int:
+    return int(np.flatnonzero(~np.isfinite(array).all(axis=1))[0])
+
+
+def _squared_lengths(normals: np.ndarray) -> np.ndarray:
+    x, y, z = normals.T
+    with np.errstate(over="ignore"):      # an overflow is found and rescaled by _bad_normals
+        return x * x + y * y + z * z
+
+
+def _bad_normals(normals: np.ndarray, length2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The slow path: raise for a non-finite or zero normal; rescale normals whose squared length
+    overflowed (finite components beyond 1e154) so that they can be made unit."""
+    if not np.isfinite(normals).all():
+        raise ValueError(f"normals: contains NaN or inf (first at index {_first_bad_row(normals)})")
+    scaled = normals / np.maximum(np.abs(normals).max(axis=1, keepdims=True), np.finfo(np.float64).tiny)
+    length2 = _squared_lengths(scaled)
+    zero = np.flatnonzero(~(length2 > 0))
+    if len(zero):
+        raise ValueError(f"normals: zero-length normal at index {int(zero[0])}")
+    return np.ascontiguousarray(scaled), length2

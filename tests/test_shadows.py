@@ -1,0 +1,241 @@
+"""The public path: sc.prepare / sc.Shadows, sc.shadow_mask over it, sc.Renderer, one receiver check.
+
+Every method is called the way a user calls it, on the shipped scenes, and compared with itself called
+another way (prepare vs one-shot, split vs union queries, a kept Renderer vs fresh renders) or with the
+exact method where the answer must be exact (points outside the prepared bounds).
+"""
+
+import numpy as np
+import pytest
+
+import shadowcl as sc
+from conftest import SCENES, require_models
+
+TRIANGLE_METHODS = ("exact", "shadow_map", "angular", "shadow_volume")
+SCENE_FILES = ["default.toml", "hard/contact.toml", "hard/light_inside.toml", "hard/grazing_plane.toml",
+               "hard/open_mesh.toml"]
+
+
+def scene_receivers(scene, count, rng):
+    """``count`` area-weighted points on ``scene``'s triangles, with their face normals."""
+    tri = scene.mesh.triangles.astype(np.float64)
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    area = np.linalg.norm(normal, axis=1)
+    face = rng.choice(len(tri), count, p=area / area.sum())
+    u, v = rng.random((2, count))
+    flip = u + v > 1
+    u, v = np.where(flip, 1 - u, u), np.where(flip, 1 - v, v)
+    points = tri[face, 0] + u[:, None] * (tri[face, 1] - tri[face, 0]) + v[:, None] * (tri[face, 2] - tri[face, 0])
+    return points, normal[face] / area[face, None]
+
+
+def box_of(points):
+    return np.stack([points.min(axis=0), points.max(axis=0)])
+
+
+# The angular method refuses a point light inside a closed solid (a named error, tested in test_angular).
+CASES = [(name, method) for name in SCENE_FILES for method in TRIANGLE_METHODS
+         if (name, method) != ("hard/light_inside.toml", "angular")]
+
+
+@pytest.mark.parametrize("name, method", CASES)
+def test_prepare_mask_is_shadow_mask(device, rng, name, method):
+    scene = sc.Scene.load(SCENES / name)
+    points, normals = scene_receivers(scene, 4000, rng)
+    one_shot = sc.shadow_mask(scene, scene.light, points, normals, method=method, device=device)
+    params = {"expected_receivers": len(points)} if "expected_receivers" in sc.methods()[method] else {}
+    shadows = sc.prepare(scene, scene.light, method, bounds=box_of(points), device=device, **params)
+    assert np.array_equal(shadows.mask(points, normals), one_shot)
+    assert shadows.method == method and shadows.stats["method"] == method
+    assert shadows.stats["receivers"] == len(points) and shadows.stats["outside_bounds"] == 0
+    assert shadows.stats["prepare_s"] > 0 and shadows.stats["classify_s"] > 0
+    assert None not in (shadows.params.get("resolution", 0), shadows.params.get("theta_resolution", 0))
+
+
+@pytest.mark.parametrize("method", TRIANGLE_METHODS)
+def test_split_queries_equal_one_query(device, rng, method):
+    scene = sc.Scene.load(SCENES / "default.toml")
+    points, normals = scene_receivers(scene, 6001, rng)
+    shadows = sc.prepare(scene, scene.light, method, device=device)
+    whole = shadows.mask(points, normals)
+    first, second = shadows.mask(points[:2500], normals[:2500]), shadows.mask(points[2500:], normals[2500:])
+    assert np.array_equal(np.concatenate([first, second]), whole)
+    assert shadows.stats["receivers"] == len(points) - 2500
+    visibility = shadows.visibility(points, normals)
+    assert visibility.dtype == np.float32 and visibility.shape == whole.shape
+    assert np.all((visibility >= 0) & (visibility <= 1))
+
+
+@pytest.mark.parametrize("method", TRIANGLE_METHODS)
+def test_points_outside_bounds_are_answered(device, rng, method):
+    """Prepared for one corner of the scene, queried everywhere: the points outside are counted and
+    answered as a call fitted to them answers them (exact-valued methods: the exact answer)."""
+    scene = sc.Scene.load(SCENES / "default.toml")
+    points, normals = scene_receivers(scene, 5000, rng)
+    low, high = scene.bounds
+    corner = np.stack([low, low + 0.4 * (high - low)])
+    shadows = sc.prepare(scene, scene.light, method, bounds=corner, device=device)
+    mask = shadows.mask(points, normals)
+    outside = np.any((points < corner[0]) | (points > corner[1]), axis=1)
+    assert shadows.stats["outside_bounds"] == outside.sum() > 1000
+    truth = sc.shadow_mask(scene, scene.light, points, normals, device=device)
+    if method in ("exact", "shadow_volume"):
+        assert np.array_equal(mask, truth)
+    elif method == "shadow_map":   # the outside points get maps fitted to them: as a one-shot call on them
+        alone = sc.shadow_mask(scene, scene.light, points[outside], normals[outside], method=method, device=device)
+        assert np.array_equal(mask[outside], alone)
+    else:                          # angular's table covers every direction from the light; rows set its error
+        assert np.mean(mask != truth) < 0.01
+
+
+@pytest.mark.parametrize("method", TRIANGLE_METHODS)
+def test_normals_any_length_and_zero_refused(device, rng, method):
+    scene = sc.Scene.load(SCENES / "default.toml")
+    points, normals = scene_receivers(scene, 3000, rng)
+    shadows = sc.prepare(scene, scene.light, method, device=device)
+    unit = shadows.mask(points, normals)
+    lengths = rng.uniform(1e-3, 1e3, (len(points), 1))
+    assert np.array_equal(shadows.mask(points, normals * lengths), unit)
+    assert np.array_equal(sc.shadow_mask(scene, scene.light, points, normals * 7.5, method=method, device=device),
+                          sc.shadow_mask(scene, scene.light, points, normals, method=method, device=device))
+    normals[17] = 0
+    with pytest.raises(ValueError, match=r"normals: zero-length normal at index 17"):
+        shadows.mask(points, normals)
+    with pytest.raises(ValueError, match=r"normals: zero-length normal at index 17"):
+        sc.shadow_mask(scene, scene.light, points, normals, method=method, device=device)
+
+
+def test_voxel_method_through_prepare(device, rng):
+    require_models()
+    scene = sc.Scene.load(SCENES / "subdivision" / "torus.toml")
+    points, normals = scene_receivers(scene, 3000, rng)
+    shadows = sc.prepare(scene, scene.light, "voxel", bounds=box_of(points), device=device, resolution=32)
+    mask = shadows.mask(points, normals)
+    assert np.array_equal(mask, sc.shadow_mask(scene, scene.light, points, normals, method="voxel", device=device,
+                                               resolution=32))
+    assert np.array_equal(shadows.mask(points, normals * 4.0), mask)
+    assert shadows.params["resolution"] == 32 and shadows.params["frame_buffer"] is True
+    assert shadows.stats["device_bytes"] > 0
+
+
+def test_shadow_volume_points_build_no_volume(device, rng):
+    """The point query is the exact method on the light-facing faces: no silhouette, no volume."""
+    scene = sc.Scene.load(SCENES / "default.toml")
+    points, normals = scene_receivers(scene, 3000, rng)
+    shadows = sc.prepare(scene, scene.light, "shadow_volume", device=device)
+    shadows.mask(points, normals)
+    assert shadows._instance._volume is None
+    assert "silhouette_edges" not in shadows.stats and shadows.stats["cap_triangles"] > 0
+
+
+def with_light(scene, light):
+    return sc.Scene(scene.objects, [light], camera=scene.camera, name=scene.name, colors=scene.colors)
+
+
+LIGHT_PATH = [(-6.0, 3.8, 1.2), (-5.8, 3.9, 1.5), (-5.5, 4.0, 1.9)]
+
+
+@pytest.mark.parametrize("method, params", [("exact", {}), ("shadow_map", {"resolution": 512}), ("angular", {}),
+                                            ("shadow_volume", {"silhouettes": "tracking"})])
+def test_renderer_moving_light_matches_render(device, method, params):
+    scene = sc.Scene.load(SCENES / "default.toml")
+    renderer = sc.Renderer(scene, method, width=96, height=54, device=device, **params)
+    for frame, position in enumerate(LIGHT_PATH):
+        light = sc.PointLight(position)
+        image = renderer.render(light=light)
+        fresh = sc.render(with_light(scene, light), method, width=96, height=54, device=device, **params)
+        assert np.array_equal(image, fresh), f"{method} frame {frame}"
+        assert renderer.report.reused == {"camera": frame > 0, "prepared": [False]}
+    again = renderer.render(light=sc.PointLight(LIGHT_PATH[-1]))
+    assert np.array_equal(again, image) and renderer.report.reused == {"camera": True, "prepared": [True]}
+    if method == "shadow_volume":   # the tracker walked from the last frame instead of testing every face
+        assert renderer._slots[0].stats["tracker"]["faces_tested"] != len(scene.mesh.faces)
+
+
+def test_renderer_moving_camera_keeps_prepared(device):
+    scene = sc.Scene.load(SCENES / "default.toml")
+    renderer = sc.Renderer(scene, "exact", width=80, height=45, device=device)
+    first = renderer.render()
+    camera = sc.Camera(scene.camera.position + [0.3, 0.2, 0.0], scene.camera.target, fov=scene.camera.fov)
+    moved = renderer.render(camera=camera)
+    assert renderer.report.reused == {"camera": False, "prepared": [True] * len(scene.lights)}
+    assert "prepare" not in renderer.report.timings and not np.array_equal(first, moved)
+    moved_scene = sc.Scene(scene.objects, scene.lights, camera=camera, colors=scene.colors)
+    assert np.array_equal(moved, sc.render(moved_scene, "exact", width=80, height=45, device=device))
+
+
+def test_renderer_voxel_second_view_reuses_frame_buffer(device):
+    require_models()
+    scene = sc.Scene.load(SCENES / "subdivision" / "torus.toml")
+    renderer = sc.Renderer(scene, "voxel", width=64, height=36, device=device, resolution=32)
+    renderer.render()
+    camera = sc.Camera(scene.camera.position * 1.1, scene.camera.target, fov=scene.camera.fov)
+    moved = renderer.render(camera=camera)
+    assert renderer.report.reused["prepared"] == [True] * len(scene.lights)
+    moved_scene = sc.Scene([(n, s) for n, s in scene.surfaces], scene.lights, camera=camera, colors=scene.colors)
+    assert np.array_equal(moved, sc.render(moved_scene, "voxel", width=64, height=36, device=device, resolution=32))
+
+
+def test_angular_render_builds_one_table_per_view(device):
+    """classify_view rebuilds the table for the camera once; the next frame of the same view reuses it."""
+    scene = sc.Scene.load(SCENES / "default.toml")
+    renderer = sc.Renderer(scene, "angular", width=96, height=54, device=device)
+    renderer.render()
+    table = renderer._slots[0]._instance.table
+    renderer.render()
+    assert renderer._slots[0]._instance.table is table
+
+
+MESH = sc.Mesh([[0, 1, 0], [1, 1, 0], [0, 1, 1]], [[0, 1, 2]])
+LIGHT = sc.PointLight((0.2, 3.0, 0.2))
+POINTS = np.array([[0.1, 0.0, 0.1], [2.0, 0.0, 2.0]])
+BAD_INPUT = [
+    (lambda d: sc.prepare("mesh", LIGHT, device=d), TypeError, r"scene_or_mesh"),
+    (lambda d: sc.prepare(MESH, (0, 3, 0), device=d), TypeError, r"light"),
+    (lambda d: sc.prepare(MESH, LIGHT, "raytrace", device=d), ValueError, r"method: unknown method"),
+    (lambda d: sc.prepare(MESH, LIGHT, 3, device=d), TypeError, r"method"),
+    (lambda d: sc.prepare(MESH, LIGHT, bounds=[[0, 0, 0]], device=d), ValueError, r"bounds: expected shape \(2, 3\)"),
+    (lambda d: sc.prepare(MESH, LIGHT, bounds=[[1, 1, 1], [0, 0, 0]], device=d), ValueError, r"bounds: low corner"),
+    (lambda d: sc.prepare(MESH, LIGHT, bounds=[[0, 0, 0], [np.nan, 1, 1]], device=d), ValueError, r"bounds:.*NaN"),
+    (lambda d: sc.prepare(MESH, LIGHT, eps=-1, device=d), ValueError, r"eps"),
+    (lambda d: sc.prepare(MESH, LIGHT, eps="small", device=d), TypeError, r"eps"),
+    (lambda d: sc.prepare(MESH, LIGHT, device=d, colour=1), TypeError, r"colour: not a parameter"),
+    (lambda d: sc.prepare(MESH, LIGHT, "shadow_map", device=d, resolution=0), ValueError, r"resolution"),
+    (lambda d: sc.prepare(MESH, LIGHT, device=d).mask(np.zeros((2, 2))), ValueError, r"points: expected shape"),
+    (lambda d: sc.prepare(MESH, LIGHT, device=d).mask([[0, 0, "x"]]), TypeError, r"points"),
+    (lambda d: sc.prepare(MESH, LIGHT, device=d).mask([[0, np.inf, 0]]), ValueError, r"points: contains NaN or inf"),
+    (lambda d: sc.prepare(MESH, LIGHT, device=d).mask([[0, 1e39, 0]]), ValueError, r"points: coordinates overflow"),
+    (lambda d: sc.prepare(MESH, LIGHT, device=d).mask(POINTS, np.zeros((3, 3))), ValueError, r"normals: expected shape"),
+    (lambda d: sc.prepare(MESH, LIGHT, device=d).mask(POINTS, [[0, 1, 0], [0, np.nan, 0]]), ValueError,
+     r"normals: contains NaN or inf \(first at index 1\)"),
+    (lambda d: sc.prepare(MESH, LIGHT, device=d).visibility(POINTS, [[0, 1, 0], [0, 0, 0]]), ValueError,
+     r"normals: zero-length normal at index 1"),
+    (lambda d: sc.Renderer(MESH, device=d), TypeError, r"scene"),
+    (lambda d: sc.Renderer(sc.Scene.load(SCENES / "default.toml"), "fast", device=d), ValueError, r"method"),
+    (lambda d: sc.Renderer(sc.Scene.load(SCENES / "default.toml"), width=0, device=d), ValueError, r"width"),
+    (lambda d: sc.Renderer(sc.Scene.load(SCENES / "default.toml"), height=20000, device=d), ValueError, r"height"),
+    (lambda d: sc.Renderer(sc.Scene.load(SCENES / "default.toml"), device=d, bias="x"), TypeError, r"bias: not a"),
+    (lambda d: sc.Renderer(sc.Scene.load(SCENES / "default.toml"), device=d).render(light="sun"), TypeError, r"light"),
+    (lambda d: sc.Renderer(sc.Scene.load(SCENES / "default.toml"), device=d).render(light=[]), ValueError, r"light"),
+    (lambda d: sc.Renderer(sc.Scene.load(SCENES / "default.toml"), device=d).render(camera="top"), TypeError,
+     r"camera"),
+]
+
+
+@pytest.mark.parametrize("call, error, match", BAD_INPUT)
+def test_bad_input(device, call, error, match):
+    with pytest.raises(error, match=match):
+        call(device)
+
+
+def test_checked_points_pass_through():
+    from shadowcl.points import check_points
+
+    points = check_points(np.zeros((4, 3), np.float32), np.ones((4, 3)))
+    assert check_points(points) is points
+    assert points.positions.dtype == np.float64 and points.positions.flags.c_contiguous
+    assert np.allclose(np.linalg.norm(points.unit_normals(), axis=1), 1)
+    huge = check_points(np.zeros((1, 3)), [[1e300, 1e300, 0]])     # squared length overflows: rescaled
+    assert np.allclose(huge.unit_normals(), [[2**-0.5, 2**-0.5, 0]])
+    with pytest.raises(TypeError, match="normals"):
+        check_points(points, np.ones((4, 3)))
