@@ -239,3 +239,16 @@ def test_checked_points_pass_through():
     assert np.allclose(huge.unit_normals(), [[2**-0.5, 2**-0.5, 0]])
     with pytest.raises(TypeError, match="normals"):
         check_points(points, np.ones((4, 3)))
+
+
+@pytest.mark.parametrize("count", [1, 2, 63, 64, 65, 127, 128, 129, 100_003])
+def test_receiver_bounds_at_every_size(rng, count):
+    """The wide reduction of shadowcl.points gives the row-wise box at sizes straddling its row width."""
+    from shadowcl.points import check_points
+
+    points = rng.normal(size=(count, 3)) * [1, 1e3, 1e-3]
+    box = check_points(points).bounds
+    assert np.array_equal(box, np.stack([points.min(axis=0), points.max(axis=0)]))
+    points[count // 2, 1] = np.nan
+    with pytest.raises(ValueError, match=rf"points: contains NaN or inf \(first at index {count // 2}\)"):
+        check_points(points)

@@ -10,11 +10,11 @@ device's precision); ``normals`` is None or the same shape, finite, each of non-
 need not be unit: every method uses them as directions (:meth:`Points.unit_normals`, or normalised on
 the device in double). A zero normal is refused with its index, never read as "facing away".
 
-Cheap by construction, since it runs on every public call: the bounds come from column-wise
-reductions (a row-wise ``min(axis=0)`` over a (N, 3) array is ~6x slower), and finiteness is read off
-them (NaN propagates through ``min``, inf is a bound); the normals' squared lengths, computed column by
-column, give both their finiteness and the zero check. The slow search for the first bad index runs
-only when a check fails. At 1.2 M receivers: ~6 ms for the points, ~7 ms more with normals.
+Cheap by construction, since it runs on every public call: the bounds come from wide reductions
+(:func:`_bounds`), and finiteness is read off them (NaN propagates through ``min``, inf is a bound);
+the normals' squared lengths give both their finiteness and the zero check. The slow search for the
+first bad index runs only when a check fails. At 1.2 M receivers: ~3 ms for the points, ~7 ms more
+with normals.
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 FLOAT32_MAX = float(np.finfo(np.float32).max)
+WIDE = 64             # points per row of _bounds' reductions
 BOUNDS_SLACK = 1e-6   # relative to a box's diagonal: a point this close outside the box counts as inside
 
 
@@ -111,10 +112,18 @@ def _real_array(name: str, value) -> np.ndarray:
 
 
 def _bounds(positions: np.ndarray) -> np.ndarray:
-    """(2, 3) float64 box, column by column (NaN and inf propagate into it)."""
+    """(2, 3) float64 box (NaN and inf propagate into it). Reduced over rows of ``WIDE`` points at once:
+    an axis-0 reduction over (N, 3) runs along short rows (~30 ms at 1.2 M points), over (N / 64, 192)
+    it vectorises (~3 ms, against ~5 ms column by column)."""
     if len(positions) == 0:
         return np.zeros((2, 3))
-    return np.array([[column.min() for column in positions.T], [column.max() for column in positions.T]])
+    whole = len(positions) // WIDE * WIDE
+    low, high = [positions[whole:]], [positions[whole:]]
+    if whole:
+        wide = positions[:whole].reshape(-1, 3 * WIDE)
+        low.append(wide.min(axis=0).reshape(-1, 3))
+        high.append(wide.max(axis=0).reshape(-1, 3))
+    return np.array([np.concatenate(low).min(axis=0), np.concatenate(high).max(axis=0)])
 
 
 def _first_bad_row(array: np.ndarray) -> int:
@@ -122,9 +131,8 @@ def _first_bad_row(array: np.ndarray) -> int:
 
 
 def _squared_lengths(normals: np.ndarray) -> np.ndarray:
-    x, y, z = normals.T
-    with np.errstate(over="ignore"):      # an overflow is found and rescaled by _bad_normals
-        return x * x + y * y + z * z
+    with np.errstate(over="ignore", invalid="ignore"):      # found and handled by _bad_normals
+        return np.einsum("ij,ij->i", normals, normals)
 
 
 def _bad_normals(normals: np.ndarray, length2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
