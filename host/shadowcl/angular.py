@@ -857,6 +857,6 @@ def shadow_counts(scene_or_mesh, lights, points, normals=None, device=None, eps=
     shadows = prepare(scene_or_mesh, lights[0], "angular", receivers.bounds, device, eps, **params)
     for index, light in enumerate(lights):
         if index:
-            shadows._prepare(light)
+            shadows.relight(light)
         counts += shadows.mask(receivers)
     return counts

@@ -26,7 +26,6 @@ Optional capabilities are declared on the class, never found by ``hasattr``:
   ``.mesh``, e.g. a subdivision surface) instead of its triangle mesh.
 - ``image_space``: :meth:`Method.classify_view` answers the camera's covered pixels from the view, its
   Z-buffer and receivers (a stencil, scan-line runs); the renderer calls it instead of ``classify``.
-- ``fractional``: :meth:`Method.visibility` gives values between 0 and 1 (a filter, 1/2^n shading).
 - ``own_renderer``: the method draws its own geometry (:meth:`Method.render_frame`).
 - ``bounded``: ``classify`` is right only inside the ``receiver_bounds`` given to ``prepare`` (a single
   shadow-map view); :class:`shadowcl.Shadows` then answers points outside by a second preparation.
@@ -64,7 +63,6 @@ class Method(abc.ABC):
     parameters: dict[str, tuple] = {}
     scene_input = False
     image_space = False
-    fractional = False
     own_renderer = False
     bounded = False
 
@@ -88,7 +86,8 @@ class Method(abc.ABC):
         """bool (N,): True = in shadow."""
 
     def visibility(self, points, normals=None) -> np.ndarray:
-        """float32 (N,) in [0, 1], 1 = lit; binary methods give 0 or 1."""
+        """float32 (N,) in [0, 1], 1 = lit: binary methods give 0 or 1 (this default), filtering ones
+        (a percentage-closer filter, 1/2^n shading) override it; the renderer shades with it."""
         return (~self.classify(points, normals)).astype(np.float32)
 
     def classify_view(self, view, zbuffer, seen) -> np.ndarray:

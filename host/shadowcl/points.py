@@ -20,6 +20,7 @@ with normals.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -40,18 +41,17 @@ class Points:
     normals: np.ndarray | None
     bounds: np.ndarray
     _length2: np.ndarray | None = field(default=None, repr=False)   # squared normal lengths, for unit_normals
-    _unit: list = field(default_factory=list, repr=False)            # cache of unit_normals()
 
     def __len__(self) -> int:
         return len(self.positions)
 
     def unit_normals(self) -> np.ndarray | None:
         """(N, 3) float64 unit normals (computed once), or None without normals."""
-        if self.normals is None:
-            return None
-        if not self._unit:
-            self._unit.append(self.normals / np.sqrt(self._length2)[:, None])
-        return self._unit[0]
+        return self._unit_normals
+
+    @cached_property   # a frozen dataclass still takes it: the cache writes the instance's __dict__
+    def _unit_normals(self) -> np.ndarray | None:
+        return None if self.normals is None else self.normals / np.sqrt(self._length2)[:, None]
 
     def facing_away(self, light) -> np.ndarray:
         """bool (N,): the normal faces away from ``light`` (``dot <= 0``, DESIGN.md's "in shadow");

@@ -155,12 +155,9 @@ class Renderer:
                     if instance.image_space:
                         shadow[index] = instance.classify_view(view, zbuffer, seen)
                         visibility[index] = ~shadow[index]
-                    elif instance.fractional:
+                    else:     # binary methods give 0 or 1, so the threshold is their own mask
                         visibility[index] = instance.visibility(points)
                         shadow[index] = visibility[index] < 0.5
-                    else:
-                        shadow[index] = instance.classify(points)
-                        visibility[index] = ~shadow[index]
             with stage("shading"):
                 if self.post_filter:
                     visibility = np.stack([_box_filter(seen, v, self.post_filter) for v in visibility])
@@ -177,7 +174,7 @@ class Renderer:
             return False
         with stage("prepare"):
             if index < len(self._slots):
-                self._slots[index]._prepare(light)
+                self._slots[index].relight(light)
             else:
                 count = self.width * self.height if self._camera is None else len(self._camera[3])
                 params = with_receiver_count(self.method, self._params, count)   # sized by the first frame

@@ -112,11 +112,10 @@ class LightMaps:
 class ShadowMapMethod(Method):
     """Williams' shadow map: prepare draws the light's depth map(s), classify compares receivers with them.
     ``bounded``: a single view covers the prepared receiver bounds only (:class:`shadowcl.Shadows` answers
-    points beyond them from maps fitted to them); ``fractional``: the filters give a visibility."""
+    points beyond them from maps fitted to them); :meth:`visibility` is the filtered answer."""
 
     name = "shadow_map"
     bounded = True
-    fractional = True
     parameters = {
         "resolution": (None, f"texels per side of each (square) depth map; None picks {DEFAULT_RESOLUTION}"),
         "bias": ("normal", "depth bias: 'constant', 'slope' (slope-scaled) or 'normal' (normal offset)"),

@@ -98,7 +98,8 @@ from .geometry import Mesh, bounds_diagonal
 from .lights import PointLight, check_light
 from .methods import Method, check_prepare
 from .points import check_points
-from .silhouette import TRACKER_METHODS, Silhouette, SilhouetteTracker, edge_adjacency, silhouette_edges
+from .silhouette import (TRACKER_METHODS, Silhouette, SilhouetteTracker, edge_adjacency, face_facing,
+                         silhouette_edges)
 
 STENCILS = ("zfail", "zpass")
 EXTRUSION_MARGIN = 2.0   # the back cap is this many times farther than the farthest receiver (see module doc)
@@ -407,7 +408,7 @@ class ShadowVolumeMethod(Method):
     @property
     def tracked_silhouette(self) -> Silhouette:
         """The tracker's own silhouette of this frame, before any brute-force completion."""
-        self.volume
+        self.volume                                       # the tracker runs when the volume is built
         return self._tracked_silhouette
 
     def _build_volume(self) -> Volume:
@@ -440,8 +441,7 @@ class ShadowVolumeMethod(Method):
         t0 = time.perf_counter()
         receivers = check_points(points, normals)
         if self._exact is None:
-            facing = silhouette_edges(self.device, edge_adjacency(self.occluders), self.light).facing
-            cap = np.flatnonzero(facing)
+            cap = np.flatnonzero(face_facing(self.device, self.occluders, self.light))
             self.stats["cap_triangles"] = len(cap)
             if len(cap):
                 self._exact = ExactMethod(self.device, expected_receivers=max(len(receivers), 1))

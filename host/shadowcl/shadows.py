@@ -46,10 +46,11 @@ class Shadows:
         self._prepare_s = self._classify_s = self._check_s = 0.0
         self._outside = 0
         self._receivers = 0
-        self._prepare(self.light)
+        self.relight(self.light)
 
-    def _prepare(self, light) -> None:
-        """(Re)build the structure for ``light`` on the same method instance (a tracker keeps its history)."""
+    def relight(self, light) -> None:
+        """Build the structure again for another ``light``, on the same method instance: what does not
+        depend on the light is kept, and a silhouette tracker has the last light's frame."""
         self.light = check_light(light)
         start = time.perf_counter()
         self._instance.prepare(self._occluders, self.light, self.bounds, self.eps)

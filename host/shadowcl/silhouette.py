@@ -218,8 +218,7 @@ class Silhouette:
         """(F,) bool: light-facing faces."""
         if self._device is None:
             return host_facing(self.adjacency.vertices, self.adjacency.faces, self.light)
-        facing_g, _ = _facing_on_device(self._device, self.adjacency, self.light)
-        return self._device.from_device(facing_g, len(self.adjacency.faces), np.uint8).astype(bool)
+        return face_facing(self._device, self.adjacency, self.light)
 
     @cached_property
     def mask(self) -> np.ndarray:
@@ -268,6 +267,15 @@ def silhouette_edges(device, adjacency: "EdgeAdjacency | Mesh", light) -> Silhou
     return Silhouette(adjacency, light,
                       codes=device.from_device(codes_g, nedges, np.int8),
                       facing=device.from_device(facing_g, nfaces, np.uint8).astype(bool))
+
+
+def face_facing(device, adjacency: "EdgeAdjacency | Mesh", light) -> np.ndarray:
+    """(F,) bool: the light-facing faces of ``adjacency`` (or a mesh's cached table), on the device
+    (one kernel, no edges classified)."""
+    if not isinstance(adjacency, EdgeAdjacency):
+        adjacency = edge_adjacency(adjacency)
+    facing_g, _ = _facing_on_device(device, adjacency, check_light(light))
+    return device.from_device(facing_g, len(adjacency.faces), np.uint8).astype(bool)
 
 
 def _facing_on_device(device, adjacency: EdgeAdjacency, light) -> tuple:

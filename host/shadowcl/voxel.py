@@ -102,7 +102,6 @@ class VoxelMethod(Method):
 
     name = "voxel"
     scene_input = True
-    fractional = True
     own_renderer = True
     parameters = {
         "resolution": (None, "voxels per side of the cubic frame buffer (<= 1024); None: 256 across the "
@@ -128,6 +127,7 @@ class VoxelMethod(Method):
         self.grid_bounds = None if p["grid_bounds"] is None else check_bounds("grid_bounds", p["grid_bounds"])
         self._builder = lightspace.ListBuilder(device, corners=4)
         self._prepared = False
+        self._leaf_mesh = None           # (voxelization, its leaf tessellation): made once per voxelization
 
     def resolved_params(self) -> dict:
         params = dict(self.params)
@@ -256,7 +256,7 @@ class VoxelMethod(Method):
 
     def leaf_mesh(self) -> vz.LeafMesh:
         """The crack-free tessellation of this voxelization's leaves (made once per voxelization)."""
-        if getattr(self, "_leaf_mesh", None) is None or self._leaf_mesh[0] is not self.vox:
+        if self._leaf_mesh is None or self._leaf_mesh[0] is not self.vox:
             self._leaf_mesh = (self.vox, self.vox.tessellate())
         return self._leaf_mesh[1]
 
