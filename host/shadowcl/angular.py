@@ -676,7 +676,7 @@ class AngularMethod(Method):
         if self.table is None:
             raise RuntimeError("classify: call prepare(mesh, light, receiver_bounds, eps) first")
         receivers = check_points(points, normals)
-        points, normals = receivers.positions, receivers.normals
+        points, normals = receivers.positions, receivers.checked_normals()
         dev, frame = self.device, self.frame
         if self._fp64:
             rot, origin, dtype = frame.rotation, frame.origin, np.float64

@@ -322,8 +322,9 @@ class ExactMethod(Method):
     def classify(self, points, normals=None) -> np.ndarray:
         """Bool (N,) mask of ``points`` ((N, 3) world positions; optional ``normals``), True = in shadow.
 
-        Normals need not be unit length (they are normalised in float64 on the device when it has
-        doubles, else on the host). Any point works, inside the prepared receiver bounds or not: outside
+        Normals need not be unit length: they are checked and normalised on the device in double when it
+        has doubles (a bad row is then reported by the host check, :meth:`Points.checked_normals`, with
+        its message), else on the host. Any point works, inside the prepared receiver bounds or not: outside
         the window it is looked up in the border cells, which extend to the view's domain; a point behind
         a single perspective view (only possible outside the prepared bounds) is tested against every
         triangle instead. Receivers are checked by :func:`shadowcl.points.check_points`.
@@ -332,17 +333,19 @@ class ExactMethod(Method):
             raise RuntimeError("classify: call prepare(mesh, light, receiver_bounds, eps) first")
         t0 = time.perf_counter()
         receivers = check_points(points, normals)
-        points, normals = receivers.positions, receivers.normals
+        points = receivers.positions
+        normals = receivers.normals if self._fp64 else receivers.unit_normals()
         n = len(points)
         out = np.empty(n, dtype=np.uint8)
         for lo in range(0, n, self.chunk):
             hi = min(n, lo + self.chunk)
             out[lo:hi] = self._run(points[lo:hi], None if normals is None else normals[lo:hi])
-        for code, name in ((3, "points"), (4, "normals")):
-            bad = np.flatnonzero(out == code)
-            if len(bad):
-                what = "contains NaN or inf" if code == 3 else "has a zero-length or non-finite normal"
-                raise ValueError(f"{name}: {what} (first at index {int(bad[0])})")
+        bad = np.flatnonzero(out == 3)
+        if len(bad):   # finite, but beyond float32 once moved into the local frame
+            raise ValueError(f"points: overflow float32 relative to the occluders (first at index {int(bad[0])})")
+        if np.any(out == 4):
+            receivers.checked_normals()          # raises the check's own error for the bad row
+            raise RuntimeError("exact: the device refused normals the host check accepts (a bug)")
         fallback = np.flatnonzero(out == 2)
         if len(fallback):
             sub_normals = None if normals is None else normals[fallback]
@@ -364,13 +367,7 @@ class ExactMethod(Method):
             origin = [np.float32(0)] * 3
             rel = np.subtract(points, self.origin).astype(np.float32)
             points_dev = _host_buffer(dev, rel)
-            if normals is not None:
-                length = np.linalg.norm(normals, axis=1, keepdims=True)
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    unit = (normals / length).astype(np.float32)
-                normals_dev = _host_buffer(dev, np.where(length > 0, unit, np.float32(0)))
-            else:
-                normals_dev = points_dev
+            normals_dev = points_dev if normals is None else _host_buffer(dev, normals.astype(np.float32))
         out_dev = dev.empty(n, "classify output")
         kernel = dev.kernel("exact.cl", "exact_classify", self._options(normals is not None, brute))
         lists_a, lists_b = self.lists.buffers()

@@ -7,19 +7,22 @@ nothing, so a point set is checked once however many layers it goes through (``s
 
 The contract: ``points`` is (N, 3) of real numbers, all finite and inside float32's range (the
 device's precision); ``normals`` is None or the same shape, finite, each of non-zero length. Normals
-need not be unit: every method uses them as directions (:meth:`Points.unit_normals`, or normalised on
-the device in double). A zero normal is refused with its index, never read as "facing away".
+need not be unit: every method uses them as directions. A zero normal is refused with its index, never
+read as "facing away".
 
-Cheap by construction, since it runs on every public call: the bounds come from wide reductions
-(:func:`_bounds`), and finiteness is read off them (NaN propagates through ``min``, inf is a bound);
-the normals' squared lengths give both their finiteness and the zero check. The slow search for the
-first bad index runs only when a check fails. At 1.2 M receivers: ~3 ms for the points, ~7 ms more
-with normals.
+Cheap by construction, since it runs on every public call. The points are checked at once: the bounds
+come from wide reductions (:func:`_bounds`), and finiteness is read off them (NaN propagates through
+``min``, inf is a bound). The normals' values are checked where they are first used, once:
+:meth:`Points.checked_normals` (and :meth:`~Points.unit_normals`, :meth:`~Points.facing_away` over it)
+on the host, or on the device by a method that normalises them there in double (the exact method),
+which reports a bad row through :meth:`Points.checked_normals` so that the error is the same. The slow
+search for the first bad index runs only when a check fails. At 1.2 M receivers: ~3 ms for the points;
+the host check of the normals ~7 ms more where it runs.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
@@ -34,24 +37,40 @@ class Points:
     """Receivers that passed :func:`check_points`.
 
     ``positions`` (N, 3) float64 C-contiguous; ``normals`` None or (N, 3) float64 C-contiguous, as given
-    (finite, non-zero length); ``bounds`` the (2, 3) box of the positions (zeros when N = 0).
+    (their values checked on first use, see the module docstring); ``bounds`` the (2, 3) box of the
+    positions (zeros when N = 0).
     """
 
     positions: np.ndarray
     normals: np.ndarray | None
     bounds: np.ndarray
-    _length2: np.ndarray | None = field(default=None, repr=False)   # squared normal lengths, for unit_normals
 
     def __len__(self) -> int:
         return len(self.positions)
 
+    def checked_normals(self) -> np.ndarray | None:
+        """The normals once checked on the host (finite, non-zero; rescaled where their squared length
+        overflows), or None; raises the named ``ValueError`` for a bad row."""
+        return self._checked[0]
+
     def unit_normals(self) -> np.ndarray | None:
-        """(N, 3) float64 unit normals (computed once), or None without normals."""
+        """(N, 3) float64 unit normals (computed once, after :meth:`checked_normals`), or None."""
         return self._unit_normals
 
-    @cached_property   # a frozen dataclass still takes it: the cache writes the instance's __dict__
+    # A frozen dataclass still takes cached properties: the cache writes the instance's __dict__.
+    @cached_property
+    def _checked(self) -> tuple:
+        if self.normals is None or len(self) == 0:
+            return self.normals, None
+        length2 = _squared_lengths(self.normals)
+        if not (length2.min() > 0 and np.isfinite(length2.max())):
+            return _bad_normals(self.normals, length2)
+        return self.normals, length2
+
+    @cached_property
     def _unit_normals(self) -> np.ndarray | None:
-        return None if self.normals is None else self.normals / np.sqrt(self._length2)[:, None]
+        normals, length2 = self._checked
+        return None if normals is None else normals / np.sqrt(length2)[:, None]
 
     def facing_away(self, light) -> np.ndarray:
         """bool (N,): the normal faces away from ``light`` (``dot <= 0``, DESIGN.md's "in shadow");
@@ -59,14 +78,13 @@ class Points:
         if self.normals is None:
             return np.zeros(len(self), dtype=bool)
         to_light = light.direction_to_light(self.positions)
-        return np.einsum("ij,ij->i", self.normals, to_light) <= 0
+        return np.einsum("ij,ij->i", self.checked_normals(), to_light) <= 0
 
     def subset(self, index) -> "Points":
         """The receivers at ``index`` (an integer array or a bool mask), checked already."""
         positions = np.ascontiguousarray(self.positions[index])
         normals = None if self.normals is None else np.ascontiguousarray(self.normals[index])
-        length2 = None if self._length2 is None else self._length2[index]
-        return Points(positions, normals, _bounds(positions), length2)
+        return Points(positions, normals, _bounds(positions))
 
 
 def check_points(points, normals=None) -> Points:
@@ -91,10 +109,7 @@ def check_points(points, normals=None) -> Points:
     normals = _real_array("normals", normals)
     if normals.shape != positions.shape:
         raise ValueError(f"normals: expected shape {positions.shape} to match points, got {normals.shape}")
-    length2 = _squared_lengths(normals)
-    if len(length2) and not (length2.min() > 0 and np.isfinite(length2.max())):
-        normals, length2 = _bad_normals(normals, length2)
-    return Points(positions, normals, bounds, length2)
+    return Points(positions, normals, bounds)
 
 
 def _real_array(name: str, value) -> np.ndarray:
