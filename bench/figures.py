@@ -17,6 +17,7 @@ import re
 import sys
 from pathlib import Path
 
+import report
 from report import time_of
 
 BENCH = Path(__file__).resolve().parent
@@ -89,11 +90,11 @@ def shadow_map_cells() -> tuple[str, str]:
     name, run = newest_run(lambda d: len(d["settings"]["sweep"].get("shadow_map", {}).get("resolution", [])) > 2)
     by_case = {}
     for r in run["rows"]:
-        by_case.setdefault((r["scene"], r["light"]), []).append(r)
+        by_case.setdefault(report.case_key(r), []).append(r)
     parts = []
     for resolution in run["settings"]["sweep"]["shadow_map"]["resolution"]:
         ratios, errs = [], []
-        for (scene, _), group in by_case.items():
+        for (scene, *_), group in by_case.items():
             exact = next((r for r in group if r["method"] == "exact"), None)
             mine = [r for r in group if r["method"] == "shadow_map" and r["params"].get("resolution") == resolution
                     and r["params"].get("bias", "normal") == "normal" and r["params"].get("filter", "nearest") == "nearest"]

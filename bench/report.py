@@ -42,8 +42,9 @@ def _cell(value, digits: int = 3) -> str:
     return str(value)
 
 
-def _case(row: dict) -> tuple:
-    return row["scene"], row["light"]
+def case_key(row: dict) -> tuple:
+    """(scene, light, with normals) of a row: its case (rows of runs before the normals option had normals)."""
+    return row["scene"], row["light"], row.get("normals", True)
 
 
 def bars(doc: dict) -> list[str]:
@@ -51,8 +52,9 @@ def bars(doc: dict) -> list[str]:
     if doc["settings"]["truth_method"] != "exact":
         return ["Bars not assessed: the truth is Embree's mask (the exact method is not available)."]
     lines = []
-    for (scene, light), group in itertools.groupby(doc["rows"], key=_case):
+    for (scene, light, normals), group in itertools.groupby(doc["rows"], key=case_key):
         group = list(group)
+        light = f"{light} {'with' if normals else 'without'} normals"
         peer = next((r for r in group if r["method"] == PEER), None)
         if peer is not None:
             fraction = peer["wrong"] / peer["receivers"]
@@ -87,12 +89,12 @@ def markdown(doc: dict, plot_name: str | None = None) -> str:
         *(f"- Case {note}" for note in doc["cases"]),
         *(f"- FAILED {f['scene']} light {f['light']} {f['label']}: {f['error']}" for f in doc["failed"]),
         "",
-        "| scene | light | setting | one-shot ms | prepare ms | query ms | M recv/s | M recv/s (query) | host share "
+        "| scene | light | normals | setting | one-shot ms | prepare ms | query ms | M recv/s | M recv/s (query) | host share "
         "| false shadow | false light | error % | vs embreex | host MiB | device MiB |",
-        "|---|---|---|" + "---:|" * 12,
+        "|---|---|---|---|" + "---:|" * 12,
     ]
     for r in doc["rows"]:
-        cells = [r["scene"], r["light"], r["label"], 1e3 * r["oneshot_s"], 1e3 * r["prepare_s"], 1e3 * r["query_s"],
+        cells = [r["scene"], r["light"], "yes" if r.get("normals", True) else "no", r["label"], 1e3 * r["oneshot_s"], 1e3 * r["prepare_s"], 1e3 * r["query_s"],
                  r["receivers_per_s"] / 1e6, r["receivers_per_s_query"] / 1e6, r["host_share"], r["false_shadow"],
                  r["false_light"], r["error_percent"], r["vs_peer"], r["host_peak_mib"], r["device_mib"]]
         lines.append("| " + " | ".join(_cell(c) for c in cells) + " |")
@@ -116,11 +118,12 @@ def plot(doc: dict, path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    cases = [(key, list(group)) for key, group in itertools.groupby(doc["rows"], key=_case)]
+    cases = [(key, list(group)) for key, group in itertools.groupby(doc["rows"], key=case_key)]
     figure, axes = plt.subplots(1, max(len(cases), 1), figsize=(6 * max(len(cases), 1), 4.5), squeeze=False)
     methods = sorted({r["method"] for r in doc["rows"]})
     style = {name: (marker, f"C{i}") for i, (name, marker) in enumerate(zip(methods, itertools.cycle("os^Dv<>p*h")))}
-    for axis, ((scene, light), rows) in zip(axes[0], cases):
+    for axis, ((scene, light, normals), rows) in zip(axes[0], cases):
+        light = f"{light}, {'with' if normals else 'no'} normals"
         floor = 100 * 0.5 / rows[0]["receivers"]
         for name in methods:
             mine = [r for r in rows if r["method"] == name]
@@ -149,14 +152,14 @@ def plot(doc: dict, path) -> None:
 def compare(doc: dict, old: dict) -> str:
     """Markdown table of new/old time ratios (below 1 is faster now) and the error then and now,
     for the settings both runs share."""
-    before = {(r["scene"], r["light"], r["label"]): r for r in old["rows"]}
+    before = {(*case_key(r), r["label"]): r for r in old["rows"]}
     counts = {(r["scene"], r["receivers"]) for r in doc["rows"]} ^ {(r["scene"], r["receivers"]) for r in old["rows"]}
     warning = [f"Receiver counts differ between the runs: {sorted(counts)}", ""] if counts else []
     lines = [f"Compared with the run of {old['date']} ({old['machine']['cpu']}):", "", *warning,
              "| scene | light | setting | prepare new/old | query new/old | one-shot new/old | error % old → new |",
              "|---|---|---|---:|---:|---:|---|"]
     for r in doc["rows"]:
-        o = before.get((r["scene"], r["light"], r["label"]))
+        o = before.get((*case_key(r), r["label"]))
         if o is not None:
             ratios = [time_of(r, k) / time_of(o, k) if time_of(o, k) else None for k in TIMES]
             lines.append(f"| {r['scene']} | {r['light']} | {r['label']} | "

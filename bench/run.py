@@ -309,6 +309,7 @@ def measure(case: Case, method: str, params: dict, truth: np.ndarray, repeats: i
     return {
         "scene": case.scene.name,
         "light": case.light_index,
+        "normals": case.normals is not None,
         "method": method,
         "params": params,
         "label": label(method, params),
@@ -343,7 +344,7 @@ def measure(case: Case, method: str, params: dict, truth: np.ndarray, repeats: i
 
 def add_peer_ratios(rows: list[dict]) -> None:
     """``vs_peer``: each row's one-shot throughput over the fastest Embree row's (prepare + classify) of its case."""
-    for _, group in itertools.groupby(rows, key=lambda r: (r["scene"], r["light"])):
+    for _, group in itertools.groupby(rows, key=report.case_key):
         group = list(group)
         peers = [r["receivers_per_s"] for r in group if r["method"] == PEER]
         for row in group:
@@ -383,12 +384,12 @@ def machine(device) -> dict:
 
 
 def run_bench(scenes, sweep: dict, counts: dict, repeats: int = 5, seed: int = 0, device=None,
-              peers: dict = PEERS, progress: bool = True) -> dict:
+              peers: dict = PEERS, progress: bool = True, normals_modes=(True,)) -> dict:
     """Run ``sweep`` on ``scenes`` (:class:`receivers.BenchScene`) and return the results document.
 
     ``counts`` gives ``ground`` and ``model`` receiver counts; ``peers`` maps names to classes with
-    the method protocol that are not shadowcl methods (tests add stand-ins). The truth is
-    :func:`ground_truth`'s method.
+    the method protocol that are not shadowcl methods (tests add stand-ins). ``normals_modes``: run each
+    case with the receivers' normals (True), without (False) or both. The truth is :func:`ground_truth`'s method.
     """
     device = sc.get_device(device)
     truth_name, truth_note = ground_truth()
@@ -398,7 +399,8 @@ def run_bench(scenes, sweep: dict, counts: dict, repeats: int = 5, seed: int = 0
     for scene in scenes:
         points, normals = rx.receivers(scene, counts["ground"], counts["model"], seed)
         eps = default_eps(scene.mesh.bounds)
-        cases += [Case(scene, i, points, normals, eps) for i in range(len(scene.lights))]
+        cases += [Case(scene, i, points, normals if given else None, eps)
+                  for i in range(len(scene.lights)) for given in normals_modes]
     rows, notes, failed = [], [], []
     load_start = os.getloadavg()  # the 2 cores are shared: a busy machine shows here
     bar = tqdm(total=len(cases) * (len(jobs) + 1), disable=not progress, unit="run")
@@ -406,7 +408,8 @@ def run_bench(scenes, sweep: dict, counts: dict, repeats: int = 5, seed: int = 0
         bar.set_description(f"{case.scene.name} truth")
         truth = truth_mask(case, truth_name, device)
         bar.update()
-        notes.append(f"{case.scene.name} light {case.light_index}: {describe_light(case.light)}; "
+        notes.append(f"{case.scene.name} light {case.light_index} {'with' if case.normals is not None else 'without'} "
+                     f"normals: {describe_light(case.light)}; "
                      f"{len(case.points)} receivers, {len(case.scene.mesh.faces)} triangles, eps {case.eps:.3g}, "
                      f"{int(truth.sum())} in shadow; scene {case.scene.source}")
         for name, params in jobs:
@@ -448,6 +451,8 @@ def main(argv=None) -> None:
                         help="methods and peers to run (their SWEEP grid, else defaults)")
     parser.add_argument("--full-sweep", action="store_true", help="every setting of FULL_SWEEP, not SWEEP's subset")
     parser.add_argument("--repeats", type=int, help="timed runs per setting (default 5, 3 with --quick)")
+    parser.add_argument("--normals", nargs="+", choices=["with", "without"], default=["with", "without"],
+                        help="receivers with their normals, without, or both (default)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", type=Path, default=RESULTS, help="folder for STEM.json, .md and .png")
     parser.add_argument("--compare", type=Path, help="an earlier run's JSON: print new/old ratios")
@@ -460,7 +465,7 @@ def main(argv=None) -> None:
     repeats = args.repeats or (3 if args.quick else 5)
     sweep = {**(FULL_SWEEP if args.full_sweep else SWEEP), **args.sweep}
     doc = run_bench([rx.load_scene(s) for s in args.scenes], {m: sweep.get(m, {}) for m in args.methods},
-                    counts, repeats, args.seed)
+                    counts, repeats, args.seed, normals_modes=[mode == "with" for mode in args.normals])
     doc["settings"]["quick"] = args.quick
     stem = ("quick-" if args.quick else "run-") + datetime.now().strftime("%Y%m%d-%H%M%S")
     table = report.markdown(doc, plot_name=f"{stem}.png")
