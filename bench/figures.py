@@ -55,25 +55,30 @@ def src(*names: str) -> str:
 
 def exact_cells() -> tuple[str, str]:
     name, run = newest_run(lambda d: "oneshot_s" in d["rows"][0])
-    rows = {(r["scene"], r["label"]): r for r in run["rows"]}
+    rows = {(*report.case_key(r)[::2], r["label"]): r for r in run["rows"]}       # (scene, normals, label)
     scenes = sorted({r["scene"] for r in run["rows"]}, key=lambda s: (s not in MODELS, s))
+    modes = sorted({r.get("normals", True) for r in run["rows"]}, reverse=True)   # with normals first
     peers = [r for r in run["rows"] if r["method"] == "embreex"]
     leaks = load("leaks.json")["rows"]
-    error = (f"the reference: {max(r['wrong'] for r in peers)} of {count(peers[0]['receivers'])} receivers differ "
-             f"from Embree on {', '.join(scenes)}{src(name)}; {sum(r['watertight_leaks'] for r in leaks)} leaks over "
-             f"{count(sum(r['rays'] for r in leaks))} rays aimed at shared edges and vertices (dot5: "
-             f"{span([r['dot5_leak_percent'] for r in leaks])} %){src('leaks.json')}")
-    exact = [rows[(s, "exact")] for s in scenes]
-    split = {r["label"]: r["vs_peer"] for r in load("exact-split-light-inside.json")["rows"]
-             if r["scene"] == "light_inside"}
-    speed = ("one-shot `shadow_mask`: " + ", ".join(f"{r['receivers_per_s'] / 1e6:.1f} M receivers/s on the {r['scene']}"
-                                                   for r in exact)
-             + f", {span([r['vs_peer'] for r in exact])}× Embree (embreex, fastest of 1 or 2 processes, prepare + "
-             f"classify) in the same run; `prepare` {span([1e3 * r['prepare_s'] for r in exact])} ms, `mask` "
-             f"{span([r['receivers_per_s_query'] / 1e6 for r in exact])} M receivers/s; "
-             f"{span([100 * r['host_share'] for r in exact])} % of the one-shot call's time on the host (outside "
-             f"OpenCL calls){src(name)}; `light_inside` {split['exact split=True']:.2f}× Embree (was "
-             f"{split['exact split=False']:.2f}× before large occluders were split){src('exact-split-light-inside.json')}")
+    with_without = " / ".join("with" if mode else "without" for mode in modes)
+    error = (f"the reference: at most {max(r['wrong'] for r in peers)} of {count(peers[0]['receivers'])} receivers "
+             f"differ from Embree on {', '.join(scenes)} ({with_without} normals){src(name)}; "
+             f"{sum(r['watertight_leaks'] for r in leaks)} leaks over {count(sum(r['rays'] for r in leaks))} rays "
+             f"aimed at shared edges and vertices (dot5: {span([r['dot5_leak_percent'] for r in leaks])} %)"
+             f"{src('leaks.json')}")
+    exact = [rows[(s, mode, "exact")] for s in scenes for mode in modes]
+    split = [r for r in exact if r["method_stats"].get("split_triangles")]
+    whole = [r for r in exact if not r["method_stats"].get("split_triangles")]
+    host = f"{span([100 * r['host_share'] for r in whole])} % of the call's time on the host (outside OpenCL calls)"
+    if split:
+        host += (f", {span([100 * r['host_share'] for r in split])} % where large occluders are split on the host "
+                 f"({', '.join(sorted({r['scene'] for r in split}))})")
+    per_scene = ", ".join(f"{s} " + " / ".join(f"{rows[(s, mode, 'exact')]['receivers_per_s'] / 1e6:.1f}"
+                                               for mode in modes) for s in scenes)
+    speed = (f"one-shot `shadow_mask`, M receivers/s ({with_without} normals): {per_scene}; "
+             f"{span([r['vs_peer'] for r in exact])}× Embree (embreex, fastest of 1 or 2 processes, prepare + "
+             f"classify) in the same run; `prepare` {span([1e3 * r['prepare_s'] for r in exact], 3)} ms, `mask` "
+             f"{span([r['receivers_per_s_query'] / 1e6 for r in exact])} M receivers/s; {host}{src(name)}")
     return error, speed
 
 
