@@ -18,6 +18,7 @@ import sys
 from pathlib import Path
 
 import report
+from peers import PEERS
 from report import time_of
 
 BENCH = Path(__file__).resolve().parent
@@ -58,11 +59,11 @@ def exact_cells() -> tuple[str, str]:
     rows = {(*report.case_key(r)[::2], r["label"]): r for r in run["rows"]}       # (scene, normals, label)
     scenes = sorted({r["scene"] for r in run["rows"]}, key=lambda s: (s not in MODELS, s))
     modes = sorted({r.get("normals", True) for r in run["rows"]}, reverse=True)   # with normals first
-    peers = [r for r in run["rows"] if r["method"] == "embreex"]
+    peers = [r for r in run["rows"] if r["method"] in PEERS]
     leaks = load("leaks.json")["rows"]
     with_without = " / ".join("with" if mode else "without" for mode in modes)
     error = (f"the reference: at most {max(r['wrong'] for r in peers)} of {count(peers[0]['receivers'])} receivers "
-             f"differ from Embree on {', '.join(scenes)} ({with_without} normals){src(name)}; "
+             f"differ from {', '.join(sorted({r['method'] for r in peers}))} on {', '.join(scenes)} ({with_without} normals){src(name)}; "
              f"{sum(r['watertight_leaks'] for r in leaks)} leaks over {count(sum(r['rays'] for r in leaks))} rays "
              f"aimed at shared edges and vertices (dot5: {span([r['dot5_leak_percent'] for r in leaks])} %)"
              f"{src('leaks.json')}")
@@ -76,8 +77,8 @@ def exact_cells() -> tuple[str, str]:
     per_scene = ", ".join(f"{s} " + " / ".join(f"{rows[(s, mode, 'exact')]['receivers_per_s'] / 1e6:.1f}"
                                                for mode in modes) for s in scenes)
     speed = (f"one-shot `shadow_mask`, M receivers/s ({with_without} normals): {per_scene}; "
-             f"{span([r['vs_peer'] for r in exact])}× Embree (embreex, fastest of 1 or 2 processes, prepare + "
-             f"classify) in the same run; `prepare` {span([1e3 * r['prepare_s'] for r in exact], 3)} ms, `mask` "
+             f"{span([r['vs_peer'] for r in exact])}× the fastest peer's throughput (of "
+             f"{', '.join(sorted({r['method'] for r in peers}))}; prepare + classify) in the same run; `prepare` {span([1e3 * r['prepare_s'] for r in exact], 3)} ms, `mask` "
              f"{span([r['receivers_per_s_query'] / 1e6 for r in exact])} M receivers/s; {host}{src(name)}")
     return error, speed
 

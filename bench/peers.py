@@ -1,4 +1,5 @@
-"""Peers: other people's shadow rays, measured in the same run with the method protocol of shadowcl.
+"""Peers: other people's shadow rays, measured in the same run with the method protocol of shadowcl:
+Embree (embreex), Open3D (``open3d-cpu``) and Mitsuba 3 (``mitsuba``, LLVM backend): the ``peers`` extra.
 
 ``EmbreePeer`` answers DESIGN.md's question with Embree (through embreex) occlusion queries. embreex's
 ``EmbreeScene.run`` takes one ray per row, fixes ``tnear`` at 0 and holds the GIL for the whole batch
@@ -183,5 +184,84 @@ class EmbreePeer:
         self._release_block()
 
 
+class Open3DPeer:
+    """Open3D's ``RaycastingScene.test_occlusions`` (Embree inside, its own threads), rays in NumPy by
+    :func:`shadow_rays`; a ray's ``tfar`` is folded into its direction's length (Open3D takes one)."""
+
+    name = "open3d"
+    parameters = {}
+
+    def __init__(self):
+        import open3d  # noqa: F401 - fail here, before any timing, when the peers extra is missing
+
+    def prepare(self, mesh, light, receiver_bounds, eps: float) -> None:
+        import open3d as o3d
+
+        self.light, self.eps = light, eps
+        self.scene = o3d.t.geometry.RaycastingScene()
+        self.scene.add_triangles(o3d.core.Tensor(mesh.vertices), o3d.core.Tensor(mesh.faces.astype(np.uint32)))
+        self.scene.test_occlusions(o3d.core.Tensor(np.zeros((1, 6), np.float32)))   # builds its BVH now
+
+    def classify(self, points, normals) -> np.ndarray:
+        import open3d as o3d
+
+        origins, directions, tfar, away = shadow_rays(points, normals, self.light, self.eps)
+        point = isinstance(self.light, PointLight)
+        rays = np.concatenate([origins, directions * tfar[:, None] if point else directions], axis=1)[~away]
+        mask = away.copy()
+        mask[~away] = self.scene.test_occlusions(o3d.core.Tensor(rays), tfar=1.0 if point else np.inf).numpy() != 0
+        return mask
+
+
+class MitsubaPeer:
+    """Mitsuba 3's ``Scene.ray_test`` on the ``llvm_ad_rgb`` variant (Dr.Jit's LLVM backend: needs a libLLVM
+    on the machine, e.g. Debian's libllvm19), the segments computed in Dr.Jit as a Mitsuba user would:
+    DESIGN.md's segment with the eps start emulated as in :func:`shadow_rays`."""
+
+    name = "mitsuba"
+    parameters = {}
+
+    def __init__(self):
+        import mitsuba as mi
+
+        mi.set_variant("llvm_ad_rgb")
+
+    def prepare(self, mesh, light, receiver_bounds, eps: float) -> None:
+        import drjit as dr
+        import mitsuba as mi
+
+        self.light, self.eps = light, eps
+        shape = mi.Mesh("occluders", len(mesh.vertices), len(mesh.faces))
+        params = mi.traverse(shape)
+        params["vertex_positions"] = mi.Float(mesh.vertices.ravel())
+        params["faces"] = mi.UInt32(mesh.faces.astype(np.uint32).ravel())
+        params.update()
+        self.scene = mi.load_dict({"type": "scene", "occluders": shape})
+        dr.eval(self.scene.ray_test(mi.Ray3f(mi.Point3f(0, 0, 0), mi.Vector3f(0, 0, 1))))   # BVH built now
+
+    def classify(self, points, normals) -> np.ndarray:
+        import drjit as dr
+        import mitsuba as mi
+
+        eps = mi.Float(self.eps)
+        p = mi.Point3f(*(mi.Float(np.ascontiguousarray(points[:, i], np.float32)) for i in range(3)))
+        n = None if normals is None else mi.Vector3f(*(mi.Float(np.ascontiguousarray(normals[:, i], np.float32))
+                                                       for i in range(3)))
+        start = p if n is None else p + eps * n
+        point = isinstance(self.light, PointLight)
+        if point:
+            to_light = mi.Point3f(*(float(c) for c in self.light.position)) - start
+            length = dr.norm(to_light)
+            direction = to_light / length
+            maxt = length - eps
+        else:
+            direction = mi.Vector3f(*(float(-c) for c in self.light.direction))
+            maxt = mi.Float(np.inf)
+        away = mi.Bool(False) if n is None else dr.dot(n, direction * (length if point else 1)) + (eps if point else 0) <= 0
+        ray = mi.Ray3f(mi.Ray3f(start + eps * direction, direction), maxt)   # (o, d, x) would read x as a time
+        hit = self.scene.ray_test(ray, active=~away)
+        return (hit | away).numpy().astype(bool)
+
+
 PEER = "embreex"  # the peer every method is compared with
-PEERS = {PEER: EmbreePeer}
+PEERS = {PEER: EmbreePeer, "open3d": Open3DPeer, "mitsuba": MitsubaPeer}

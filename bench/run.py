@@ -53,6 +53,8 @@ from shadowcl.metrics import mask_error
 SWEEP = {
     "exact": {},
     "embreex": {"workers": [1, 2]},
+    "open3d": {},
+    "mitsuba": {},
     # the default settings across resolutions; the full grid (bias x filter at every resolution, 8192
     # included: ~3 GB for a cube) is FULL_SWEEP, run with --full-sweep
     "shadow_map": {"resolution": [256, 1024, 2048, 4096]},
@@ -108,9 +110,9 @@ def close(instance) -> None:
 def available(name: str, peers: dict = PEERS) -> str | None:
     """None when method or peer ``name`` can be used, else why not (an import error)."""
     try:
-        if name == PEER:
-            import embreex  # noqa: F401
-        elif name not in peers:
+        if name in peers:
+            peers[name]()      # a peer imports its library when made
+        else:
             method_class(name)
     except ImportError as error:
         return f"{type(error).__name__}: {error}"
@@ -342,13 +344,15 @@ def measure(case: Case, method: str, params: dict, truth: np.ndarray, repeats: i
     }
 
 
-def add_peer_ratios(rows: list[dict]) -> None:
-    """``vs_peer``: each row's one-shot throughput over the fastest Embree row's (prepare + classify) of its case."""
+def add_peer_ratios(rows: list[dict], peers: dict = PEERS) -> None:
+    """``vs_peer``: each row's one-shot throughput over the fastest peer row's (prepare + classify) of its
+    case; ``fastest_peer`` names that row."""
     for _, group in itertools.groupby(rows, key=report.case_key):
         group = list(group)
-        peers = [r["receivers_per_s"] for r in group if r["method"] == PEER]
+        fastest = max((r for r in group if r["method"] in peers), key=lambda r: r["receivers_per_s"], default=None)
         for row in group:
-            row["vs_peer"] = row["receivers_per_s"] / max(peers) if peers else None
+            row["vs_peer"] = row["receivers_per_s"] / fastest["receivers_per_s"] if fastest else None
+            row["fastest_peer"] = fastest["label"] if fastest else None
 
 
 def describe_light(light) -> str:
@@ -422,7 +426,7 @@ def run_bench(scenes, sweep: dict, counts: dict, repeats: int = 5, seed: int = 0
                 bar.write(f"FAILED {case.scene.name} {label(name, params)}: {failed[-1]['error']}")
             bar.update()
     bar.close()
-    add_peer_ratios(rows)
+    add_peer_ratios(rows, peers)
     return {
         "date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "machine": machine(device),

@@ -191,3 +191,25 @@ def test_sweep_grid_expands_to_every_combination():
     grid = {"resolution": [256, 1024], "bias": ["slope", "normal"], "filter": ["pcf"]}
     assert len(run.settings(grid)) == 4
     assert run.label("shadow_map", run.settings(grid)[0]) == "shadow_map resolution=256 bias=slope filter=pcf"
+
+
+@pytest.mark.parametrize("name", ["embreex", "open3d", "mitsuba"])
+@pytest.mark.parametrize("scene_file", ["hard/light_inside.toml", "default.toml"])
+def test_peers_agree_with_exact(device, name, scene_file):
+    """Every peer answers DESIGN.md's question: in a room round the light (segments must end at the
+    light, not run past it) and on the default scene, with and without normals."""
+    try:
+        peer = peers.PEERS[name]()
+    except ImportError as error:     # the peers extra is optional (CI installs embreex only)
+        pytest.skip(f"{name} not installed: {error}")
+    import shadowcl as sc
+    scene = rx.load_scene(str(PROJECT / "scenes" / scene_file))
+    points, normals = rx.receivers(scene, 6000, 2000, 0)
+    eps = default_eps(scene.mesh.bounds)
+    peer.prepare(scene.mesh, scene.lights[0], None, eps)
+    try:
+        for given in (normals, None):
+            truth = sc.shadow_mask(scene.mesh, scene.lights[0], points, given, device=device, eps=eps)
+            assert np.count_nonzero(peer.classify(points, given) != truth) <= 2e-4 * len(points)
+    finally:
+        run.close(peer)
