@@ -317,7 +317,7 @@ def test_split_opens_no_leak_through_shared_edges(device, rng):
     and rays aimed through float32 points of shared edges and vertices must still all hit."""
     mesh, position = icosphere(2), np.array([0.02, 1.3, 0.01])
     points = aimed_receivers(mesh, None, 16, rng, position)
-    mask, method = classify(mesh, sc.PointLight(position), points, eps=1e-6, device=device)
+    mask, method = classify(mesh, sc.PointLight(position), points, eps=1e-6, device=device, split=True)
     assert method.stats["split_triangles"] > 0
     assert mask.all(), f"{int((~mask).sum())} of {len(points)} rays leak"
 

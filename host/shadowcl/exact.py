@@ -36,10 +36,13 @@ receivers on the ground + 200 k on the model, random order, PoCL on 2 cores; ran
   13 past the cull, same masks bit for bit. Split off and on alternating (loaded machine): classify
   0.44x, prepare + classify 0.48x, prepare 2.8 -> 12.3 ms (five more builds, the host's dedup); vs
   the fastest Embree 0.30 -> 0.65 and 0.57 -> 0.73 in bench runs (bench/results/exact-split-light-inside.md).
-  Triggered only when the coarse lists hold more than SPLIT_PER_COARSE_CELL entries per coarse cell
-  (light_inside 33; contact 4.5, grazing_plane 6.2; a model on a ground quad lists the quad in every
-  coarse cell: bunny 2.6, ogre 3.1, teapot 2.9, where a forced split shortened the mean walk by less
-  than 0.2 entries, for five more builds).
+  Triggered only when the coarse lists hold more than SPLIT_PER_COARSE_CELL entries per coarse cell.
+  **Off by default** since the public one-shot call was measured (2026-12-01, 1.2 M receivers, the
+  16 shipped and model scenes, split off / on alternating, median of 5): it triggers on 5 of them and
+  makes the one-shot ``shadow_mask`` slower on 4 (teapot 81 -> 102 ms, default 53 -> 119, contact 58 ->
+  87, far_offset 53 -> 115) and 8 % faster on light_inside (164 -> 151): its build (five more list
+  builds and the host's dedup, ~60 ms) costs more than one query saves. A caller who prepares once
+  and queries many times with long coarse lists (light_inside: query 161 -> 71 ms) passes split=True.
 
 Where the time goes, per stage (``stats``: upload, views, lists, records; classify), and how fast the
 public call is against Embree: bench/results (``python bench/run.py``; README's figures are generated
@@ -134,9 +137,11 @@ class ExactMethod(Method):
         "initial_capacity": (None, "linked lists: nodes allocated for the first build (None: 8 per triangle); "
                                    "an overflow grows the buffer to the counted size and rebuilds"),
         "chunk": (1 << 22, "receivers per classify launch (bounds device memory)"),
-        "split": (True, "csr lists: when the coarse lists are long (more than SPLIT_PER_COARSE_CELL entries "
-                        "per coarse cell: walls round a light inside a room), bin the triangles listed there "
-                        "by pieces small enough for the fine grid; the walk still tests the whole triangle"),
+        "split": (False, "csr lists: when the coarse lists are long (more than SPLIT_PER_COARSE_CELL entries "
+                         "per coarse cell: walls round a light inside a room), bin the triangles listed there "
+                         "by pieces small enough for the fine grid; the walk still tests the whole triangle. "
+                         "Pays when one prepared structure answers many queries (its build costs more than "
+                         "one query saves: see the module docstring)"),
     }
 
     def __init__(self, device, **params):
