@@ -213,3 +213,15 @@ def test_peers_agree_with_exact(device, name, scene_file):
             assert np.count_nonzero(peer.classify(points, given) != truth) <= 2e-4 * len(points)
     finally:
         run.close(peer)
+
+
+def test_scale_series_rows_and_exponents(device):
+    """bench/scale.py on a tiny city: one row per tool, every mask equal to exact's, a fitted exponent."""
+    import scale
+
+    rows = scale.measure(scale.city(1, 2), 1500, 500, 1, device) + scale.measure(scale.city(2, 2), 1500, 500, 1, device)
+    tools = {r["tool"] for r in rows}
+    assert {"exact", "embreex"} <= tools and all(r["wrong"] == 0 for r in rows)
+    assert rows[0]["triangles"] == 20 * 4**2 + 2 and rows[-1]["triangles"] == 4 * 20 * 4**2 + 2
+    fits = scale.exponents(rows, "triangles")
+    assert set(fits) == tools and all(np.isfinite(e) for e in fits.values())
