@@ -212,16 +212,22 @@ __kernel void wt_records(__global const float *tris, int ntris, float lx, float 
     const float len = SC_SQRT(nx * nx + ny * ny + nz * nz);
     const float inv = (len > 0.0f) ? 1.0f / len : 0.0f;
     nx *= inv; ny *= inv; nz *= inv;
+    /* How far the computed unit normal may lean off the true one: the cross product's rounding is
+     * ~eps |u| |v| per component, over |u x v| = |u| |v| sin(angle), so a sliver's normal leans by
+     * ~eps / sin(angle) (2e-4 at an aspect of 4e-4); NORMAL_ULPS of it, and 1e-6 for the rest. */
+    const float lean = (len > 0.0f) ? NORMAL_ULPS * FLT_EPSILON * SC_SQRT(ux * ux + uy * uy + uz * uz) *
+                                          SC_SQRT(vx * vx + vy * vy + vz * vz) * inv : 0.0f;
+    const float rel = 1.0e-6f + lean;
 #if LIGHT_POINT
     const float ax = lx - v[0], ay = ly - v[1], az = lz - v[2];
     r[12] = nx * ax + ny * ay + nz * az;
-    r[13] = 1.0e-6f * (SC_ABS(ax) + SC_ABS(ay) + SC_ABS(az)) + 1.0e-30f;
+    r[13] = rel * (SC_ABS(ax) + SC_ABS(ay) + SC_ABS(az)) + 1.0e-30f;
 #else
     r[12] = -(nx * lx + ny * ly + nz * lz);
-    r[13] = 1.0e-6f;
+    r[13] = rel;
 #endif
     r[9] = nx; r[10] = ny; r[11] = nz;
-    r[14] = 0.0f; r[15] = 0.0f;
+    r[14] = rel; r[15] = 0.0f;
 }
 
 /* Dot5 records from 9-float triangles: see DOT5_FLOATS in ray_triangle.h. */

@@ -35,8 +35,22 @@
 
 #include "vecmath.h"
 
+/* WT_REFINE_F64 1 (needs cl_khr_fp64): a triangle the float32 edge functions call hit gets its hit
+ * distance again in double from the same float32 inputs. The edge functions decide inside-ness
+ * watertightly in float32, but T (the scaled distance) is a sum of products of sheared coordinates: for
+ * a long triangle met at a grazing angle near the ray's origin its rounding can exceed T itself (a
+ * 31-unit strip met at 0.04 degrees 0.01 from the receiver came out behind the origin: a leak). */
+#ifndef WT_REFINE_F64
+#define WT_REFINE_F64 0
+#endif
+#if WT_REFINE_F64
+#pragma OPENCL EXTENSION cl_khr_fp64 : enable
+#endif
+
 typedef struct {
     float ox, oy, oz;           /* ray origin */
+    float dx, dy, dz;           /* direction */
+    int kx, ky, kz;             /* axis permutation: kz the dominant axis of the direction */
     float xx, xy, xz;           /* shear row for x: e_kx - Sx e_kz */
     float yx, yy, yz;           /* shear row for y: e_ky - Sy e_kz */
     float zx, zy, zz;           /* scaled z row:   Sz e_kz */
@@ -55,6 +69,8 @@ INLINE WtRay wt_setup(float ox, float oy, float oz, float dx, float dy, float dz
     const float sz = 1.0f / dkz, sx = dkx * sz, sy = dky * sz;   /* one division: any consistent shear will do */
     WtRay r;
     r.ox = ox; r.oy = oy; r.oz = oz;
+    r.dx = dx; r.dy = dy; r.dz = dz;
+    r.kx = kx; r.ky = ky; r.kz = kz;
     r.xx = (kx == 0) ? 1.0f : ((kz == 0) ? -sx : 0.0f);
     r.xy = (kx == 1) ? 1.0f : ((kz == 1) ? -sx : 0.0f);
     r.xz = (kx == 2) ? 1.0f : ((kz == 2) ? -sx : 0.0f);
@@ -66,6 +82,31 @@ INLINE WtRay wt_setup(float ox, float oy, float oz, float dx, float dy, float dz
     r.zz = (kz == 2) ? sz : 0.0f;
     return r;
 }
+
+#if WT_REFINE_F64
+INLINE double wt_axis(double x, double y, double z, int k) { return (k == 0) ? x : ((k == 1) ? y : z); }
+
+/* The hit distance of a triangle the float32 test found inside, against (tmin, tmax), in double. */
+INLINE int wt_interval_f64(const WtRay *r, float v0x, float v0y, float v0z, float v1x, float v1y, float v1z,
+                           float v2x, float v2y, float v2z, float tmin, float tmax)
+{
+    const double a0 = (double)v0x - r->ox, a1 = (double)v0y - r->oy, a2 = (double)v0z - r->oz;
+    const double b0 = (double)v1x - r->ox, b1 = (double)v1y - r->oy, b2 = (double)v1z - r->oz;
+    const double c0 = (double)v2x - r->ox, c1 = (double)v2y - r->oy, c2 = (double)v2z - r->oz;
+    const double dkz = wt_axis(r->dx, r->dy, r->dz, r->kz);
+    const double sx = wt_axis(r->dx, r->dy, r->dz, r->kx) / dkz, sy = wt_axis(r->dx, r->dy, r->dz, r->ky) / dkz;
+    const double az = wt_axis(a0, a1, a2, r->kz), bz = wt_axis(b0, b1, b2, r->kz), cz = wt_axis(c0, c1, c2, r->kz);
+    const double ax = wt_axis(a0, a1, a2, r->kx) - sx * az, ay = wt_axis(a0, a1, a2, r->ky) - sy * az;
+    const double bx = wt_axis(b0, b1, b2, r->kx) - sx * bz, by = wt_axis(b0, b1, b2, r->ky) - sy * bz;
+    const double cx = wt_axis(c0, c1, c2, r->kx) - sx * cz, cy = wt_axis(c0, c1, c2, r->ky) - sy * cz;
+    const double U = cx * by - cy * bx, V = ax * cy - ay * cx, W = bx * ay - by * ax;
+    const double det = U + V + W;
+    const double T = (U * az + V * bz + W * cz) / dkz;           /* t = T / det in units of the direction */
+    const double sgn = (det < 0.0) ? -1.0 : 1.0;
+    const double Ts = T * sgn, ad = det * sgn;
+    return (Ts > tmin * ad) & (Ts < tmax * ad);
+}
+#endif
 
 /* Watertight hit of triangle (v0, v1, v2) for tmin < t < tmax. */
 INLINE int wt_hit(const WtRay *r, float v0x, float v0y, float v0z, float v1x, float v1y, float v1z,
@@ -86,6 +127,11 @@ INLINE int wt_hit(const WtRay *r, float v0x, float v0y, float v0z, float v1x, fl
     const float V = ax * cy - ay * cx;
     const float W = bx * ay - by * ax;
     const int inside = ((U >= 0.0f) & (V >= 0.0f) & (W >= 0.0f)) | ((U <= 0.0f) & (V <= 0.0f) & (W <= 0.0f));
+#if WT_REFINE_F64
+    if (!inside)
+        return 0;
+    return wt_interval_f64(r, v0x, v0y, v0z, v1x, v1y, v1z, v2x, v2y, v2z, tmin, tmax);
+#endif
     /* Scaled hit distance against the interval, sign of det folded in */
     const float det = U + V + W;
     const float T = U * az + V * bz + W * cz;
@@ -96,8 +142,10 @@ INLINE int wt_hit(const WtRay *r, float v0x, float v0y, float v0z, float v1x, fl
 
 /* Watertight triangle record (WT_FLOATS = 16 floats, one 64-byte line): the corners v0, v1, v2 as
  * stored (9), then for the plane cull the unit normal n (3), fL = n.(light - v0) for a point light or
- * n.(-direction) for a directional light, and its rounding bound eL (2), and 2 floats of padding. */
+ * n.(-direction) for a directional light, and its rounding bound eL (2), the relative bound rel of the
+ * plane test (1: 1e-6 plus how far the computed normal may lean, large for slivers), 1 float of padding. */
 #define WT_FLOATS 16
+#define NORMAL_ULPS 8.0f   /* the cross product's rounding, in FLT_EPSILON, that the cull allows for */
 
 /* Plane cull: 1 when the segment from s to the light certainly stays on one side of the triangle's
  * plane (s and the light both farther than their rounding bounds from it, on the same side), so no
@@ -108,7 +156,7 @@ INLINE int wt_culled(__global const float *t, float sx, float sy, float sz)
 {
     const float a0 = sx - t[0], a1 = sy - t[1], a2 = sz - t[2];
     const float fs = t[9] * a0 + t[10] * a1 + t[11] * a2;
-    const float es = 1.0e-6f * (SC_ABS(a0) + SC_ABS(a1) + SC_ABS(a2));
+    const float es = t[14] * (SC_ABS(a0) + SC_ABS(a1) + SC_ABS(a2));
     const float fl = t[12], el = t[13];
     return ((fs > es) & (fl > el)) | ((fs < -es) & (fl < -el));
 }

@@ -28,6 +28,14 @@ receivers on the ground + 200 k on the model, random order, PoCL on 2 cores; ran
   for the gather alone) than the cache misses it saves (49 ms random against 33 ms sorted).
 - Watertight against dot5: the same speed within noise (the cull does most of the rejecting); dot5
   leaks on 6-8% of rays aimed at shared edges and vertices, watertight on none.
+- Slivers and long strips (aspect ratios to 1e-4): the float32 edge functions decide inside-ness
+  watertightly, but the hit distance T / det is a sum of products of large sheared coordinates, and a
+  31-unit strip met at 0.04 degrees 0.01 from the receiver came out behind it (leaks on two of the
+  eight sliver-prism cases of the tests). With doubles on the device (``WT_REFINE_F64``), a triangle
+  found inside gets its distance again in double from the same float32 inputs: no leak, the same masks
+  on bunny, light_inside and the default scene, time within noise (86 / 82, 120 / 137, 51 / 50 ms on /
+  off). The plane cull's tolerance grows with how far a sliver's computed normal may lean
+  (eps / sin of its angle, ``NORMAL_ULPS``); those cases did not need it, the bound says it can.
 - Large triangles in long coarse lists are binned by pieces (``split``, CSR only; :meth:`ExactMethod._split_lists`).
   A light inside a room (scenes/hard/light_inside.toml, cube of six views) had its walls, floor and
   long pillar faces in the coarse lists: 46 coarse entries per receiver on average, 52 in all per
@@ -320,6 +328,7 @@ class ExactMethod(Method):
             f"-DLISTS_LINKED={int(self.lists_kind == 'linked')}",
             f"-DBRUTE={int(brute)}",
             f"-DINPUT_F64={int(self._fp64)}",
+            f"-DWT_REFINE_F64={int(self._fp64)}",
             f"-DCOARSE={int(self.lists.coarse_entries != 0)}",
         )
 
