@@ -1,10 +1,26 @@
-/* exact.cl: exact hard shadows, one receiver per work-item, against its light-space cells' lists
- * (its fine cell's and its coarse cell's: lightspace.h).
+/* exact.cl: exact hard shadows, receivers binned by light-space cell and classified LANES at a time
+ * against their cells' lists (their fine cell's and their coarse cell's: lightspace.h).
  *
  * Meaning (DESIGN.md): a receiver p is in shadow when the segment from s to a point light (the ray
  * from s against a directional light's travel direction) hits a triangle at a distance greater than eps
  * from s and before the light; s = p + eps n when normals are given, else s = p. A normal facing away
  * from the light (n . (light - p) <= 0) is in shadow without testing.
+ *
+ * The passes: the count / scan / fill of the occluder lists (lightspace.cl) applied to the receivers,
+ * then the walk in the irregular Z-buffer's traversal order (the receivers of a cell together):
+ *   exact_bin_count  per receiver: check it, start it (s and its interval), find its fine cell, take a
+ *                    slot there (atomic_inc on the cell's count); the code of a receiver needing no walk
+ *   (host)           exclusive prefix sum of the counts (lightspace.ListBuilder.prefix_sum)
+ *   exact_bin_fill   per receiver again (the same arithmetic, so the same cell): its record at its
+ *                    cell's offset + its slot
+ *   exact_classify   per packet of LANES consecutive records: the receivers of a cell share its list,
+ *                    each triangle is loaded once and tested against all the packet's lanes still
+ *                    unshadowed (plane cull and test over lanes: ray_triangle.h, vecmath.h), the walk
+ *                    ends when they are all shadowed; each answer is written at its receiver's index.
+ * A packet spanning several cells walks each of their lists with that cell's lanes. exact_classify_points
+ * (LANES 1) is the other order: one receiver per work-item as given, no binning. Points a single
+ * perspective view cannot place (behind it: only possible outside the prepared bounds) are binned in
+ * one more cell, brute_cell = the grid's cell count, whose list is every triangle.
  *
  * Build options:
  *   LIGHT_POINT   1: point light at (lx, ly, lz); 0: directional light travelling along (lx, ly, lz) (unit)
@@ -12,15 +28,14 @@
  *   TEST_DOT5     0: watertight test (after the plane cull) on WT_FLOATS records; 1: dot5 on DOT5_FLOATS
  *   COARSE        1: also walk the receiver's coarse-cell list (0 when no primitive is coarse)
  *   LISTS_LINKED  0: CSR lists (offsets, items); 1: linked lists (heads, nodes)
- *   BRUTE         1: test every triangle (no lists): the fallback for points a view cannot place
  *   INPUT_F64     1: points and normals arrive as float64 world coordinates and are made relative to
  *                 (ox, oy, oz) and rounded here, exactly as the host would (needs cl_khr_fp64);
  *                 0: they arrive as float32, already relative
+ *   LANES         receivers per packet (vecmath.h)
  *   NVIEWS, PERSPECTIVE: the light-space grid (lightspace.h)
  *
- * Output: out[i] = 1 in shadow, 0 lit, 2 "no cell" (behind a single perspective view: the host
- * classifies those points again with BRUTE), 3 the point is not finite, 4 the normal is zero or not
- * finite (the host raises).
+ * Codes in out[i]: 1 in shadow, 0 lit, 3 the point is not finite, 4 the normal is zero or not finite
+ * (the host raises for 3 and 4).
  */
 #include "lightspace.h"
 #include "ray_triangle.h"
@@ -37,9 +52,6 @@
 #ifndef LISTS_LINKED
 #define LISTS_LINKED 0
 #endif
-#ifndef BRUTE
-#define BRUTE 0
-#endif
 #ifndef INPUT_F64
 #define INPUT_F64 0
 #endif
@@ -50,73 +62,36 @@
 #if INPUT_F64
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 typedef double input_t;
-#define INPUT_SQRT(x) __builtin_sqrt(x)
 #else
 typedef float input_t;
-#define INPUT_SQRT(x) SC_SQRT(x)
 #endif
 
 #define SC_FINITE(x) ((x) - (x) == 0.0f)
+#define RECEIVER_FLOATS 8   /* a binned receiver: sx sy sz tmin, then as int bits fine cell, coarse cell (-1: none), index, 0 */
+#define WALK 0              /* receiver_start: the receiver needs a walk */
 
-#if TEST_DOT5
-#define TRI_HIT(t) dot5_hit(sx, sy, sz, dx, dy, dz, tris + DOT5_FLOATS * (t), tmin, tmax)
-#else
-#define TRI_HIT(t) (!wt_culled(tris + WT_FLOATS * (t), sx, sy, sz) &&                                 \
-                    wt_hit(&ray, tris[WT_FLOATS * (t)], tris[WT_FLOATS * (t) + 1], tris[WT_FLOATS * (t) + 2], \
-                           tris[WT_FLOATS * (t) + 3], tris[WT_FLOATS * (t) + 4], tris[WT_FLOATS * (t) + 5],   \
-                           tris[WT_FLOATS * (t) + 6], tris[WT_FLOATS * (t) + 7], tris[WT_FLOATS * (t) + 8],   \
-                           tmin, tmax))
-#endif
-
-/* Walk one cell's list until a hit */
-#if LISTS_LINKED
-#define WALK(cell)                                                                                   \
-    for (int node = lists_a[cell]; node >= 0 && !hit; node = lists_b[2 * node + 1]) {                \
-        const int t = lists_b[2 * node];                                                             \
-        hit = TRI_HIT(t);                                                                            \
-    }
-#else
-#define WALK(cell)                                                                                   \
-    {                                                                                                \
-        const int end = lists_a[(cell) + 1];                                                         \
-        for (int k = lists_a[cell]; k < end && !hit; ++k) {                                          \
-            const int t = lists_b[k];                                                                \
-            hit = TRI_HIT(t);                                                                        \
-        }                                                                                            \
-    }
-#endif
-
-/* Contract: points (n x 3, float32 relative to the local origin, or float64 world with INPUT_F64 and
- * the origin in (ox, oy, oz)), normals likewise if NORMALS (any non-zero length); tris: triangle
- * records (see TEST_DOT5); views: the grid the lists were built on; lists_a, lists_b: (offsets, items)
- * or (heads, nodes); (lx, ly, lz): light position (relative) or direction; eps: absolute offset.
- * Writes out[0..n). */
-__kernel void exact_classify(__global const input_t *points, __global const input_t *normals, int n,
-                             input_t ox, input_t oy, input_t oz,
-                             __global const float *tris, int ntris,
-                             __constant const float *views,
-                             __global const int *lists_a, __global const int *lists_b,
-                             float lx, float ly, float lz, float eps, __global uchar *out)
-{
-    const int i = get_global_id(0);
-    if (i >= n)
-        return;
-    float sx = (float)(points[3 * i] - ox), sy = (float)(points[3 * i + 1] - oy), sz = (float)(points[3 * i + 2] - oz);
-    if (!(SC_FINITE(sx) & SC_FINITE(sy) & SC_FINITE(sz))) {
-        out[i] = 3;
-        return;
-    }
-
-    /* Direction to the light */
 #if LIGHT_POINT
-    float dx = lx - sx, dy = ly - sy, dz = lz - sz;
+#define TMAX 1.0f           /* t in units of |light - s| */
 #else
-    const float dx = -lx, dy = -ly, dz = -lz;
+#define TMAX SC_BIG
 #endif
 
-    /* Back-facing receivers are in shadow; the others start eps along their (unit) normal */
+/* Receiver i's start s (relative float32) and tmin, or its code when it needs no walk (1, 3, 4). */
+INLINE int receiver_start(int i, __global const input_t *points, __global const input_t *normals,
+                          input_t ox, input_t oy, input_t oz, float lx, float ly, float lz, float eps,
+                          float *px, float *py, float *pz, float *ptmin)
+{
+    float sx = (float)(points[3 * i] - ox), sy = (float)(points[3 * i + 1] - oy), sz = (float)(points[3 * i + 2] - oz);
+    if (!(SC_FINITE(sx) & SC_FINITE(sy) & SC_FINITE(sz)))
+        return 3;
 #if NORMALS
+    /* Back-facing receivers are in shadow; the others start eps along their (unit) normal */
     {
+#if LIGHT_POINT
+        const float dx = lx - sx, dy = ly - sy, dz = lz - sz;
+#else
+        const float dx = -lx, dy = -ly, dz = -lz;
+#endif
         const input_t mx = normals[3 * i], my = normals[3 * i + 1], mz = normals[3 * i + 2];
         float nx_ = (float)mx, ny_ = (float)my, nz_ = (float)mz;
         float len2 = nx_ * nx_ + ny_ * ny_ + nz_ * nz_;
@@ -124,60 +99,228 @@ __kernel void exact_classify(__global const input_t *points, __global const inpu
             /* tiny, huge or invalid: rescale in the input precision first */
             const input_t big = (mx < 0 ? -mx : mx) > (my < 0 ? -my : my) ? (mx < 0 ? -mx : mx) : (my < 0 ? -my : my);
             const input_t scale = big > (mz < 0 ? -mz : mz) ? big : (mz < 0 ? -mz : mz);
-            if (!(scale > 0) || !(mx - mx == 0) || !(my - my == 0) || !(mz - mz == 0)) {
-                out[i] = 4;
-                return;
-            }
+            if (!(scale > 0) || !(mx - mx == 0) || !(my - my == 0) || !(mz - mz == 0))
+                return 4;
             nx_ = (float)(mx / scale); ny_ = (float)(my / scale); nz_ = (float)(mz / scale);
             len2 = nx_ * nx_ + ny_ * ny_ + nz_ * nz_;
         }
         const float inv = 1.0f / SC_SQRT(len2);
         nx_ *= inv; ny_ *= inv; nz_ *= inv;
-        if (dot3(nx_, ny_, nz_, dx, dy, dz) <= 0.0f) {
-            out[i] = 1;
-            return;
-        }
+        if (dot3(nx_, ny_, nz_, dx, dy, dz) <= 0.0f)
+            return 1;
         sx += eps * nx_; sy += eps * ny_; sz += eps * nz_;
-#if LIGHT_POINT
-        dx = lx - sx; dy = ly - sy; dz = lz - sz;
-#endif
     }
 #endif
-
-    /* The interval of the segment (point light: t in units of |light - s|) or of the ray */
 #if LIGHT_POINT
-    const float tmin = eps / SC_SQRT(dot3(dx, dy, dz, dx, dy, dz));
-    const float tmax = 1.0f;
+    const float dx = lx - sx, dy = ly - sy, dz = lz - sz;
+    *ptmin = eps / SC_SQRT(dot3(dx, dy, dz, dx, dy, dz));
 #else
-    const float tmin = eps;
-    const float tmax = SC_BIG;
+    *ptmin = eps;
 #endif
-#if !TEST_DOT5
-    const WtRay ray = wt_setup(sx, sy, sz, dx, dy, dz);
-#endif
+    *px = sx; *py = sy; *pz = sz;
+    return WALK;
+}
 
-    int hit = 0;
-#if BRUTE
-    for (int t = 0; t < ntris && !hit; ++t)
-        hit = TRI_HIT(t);
-#else
-    /* The receiver's cells: its segment projects onto them, so their lists hold every possible blocker */
+/* The fine cell a started receiver is binned in (brute_cell when the view cannot place it), and in
+ * *coarse its coarse cell (-1 for brute_cell) */
+INLINE int receiver_cell(__constant const float *views, int brute_cell, float sx, float sy, float sz, int *coarse)
+{
     float w;
-    int coarse;
-    const int cell = ls_point_cells(views, sx, sy, sz, &w, &coarse);
+    const int cell = ls_point_cells(views, sx, sy, sz, &w, coarse);
 #if PERSPECTIVE && NVIEWS == 1
     if (!(w > 0.0f)) {
-        out[i] = 2;
-        return;
+        *coarse = -1;
+        return brute_cell;
     }
 #endif
-    WALK(cell)
-#if COARSE
-    WALK(coarse)
-#endif
-#endif
-    out[i] = (uchar)hit;
+    return cell;
 }
+
+#define BIN_ARGS                                                                                     \
+    __global const input_t *points, __global const input_t *normals, int n, input_t ox, input_t oy,  \
+        input_t oz, __constant const float *views, int brute_cell, float lx, float ly, float lz, float eps
+
+/* Pass 1. Contract: points (n x 3, float32 relative to the local origin, or float64 world with
+ * INPUT_F64 and the origin in (ox, oy, oz)), normals likewise if NORMALS (any non-zero length); views:
+ * the grid the lists were built on; counts: brute_cell + 1 ints, zeroed. Writes out[i] (the code of a
+ * receiver needing no walk, else 0) and slot[i] (its rank in its cell, -1 when it needs no walk). */
+__kernel void exact_bin_count(BIN_ARGS, __global int *counts, __global int *slot, __global uchar *out)
+{
+    const int i = get_global_id(0);
+    if (i >= n)
+        return;
+    float sx, sy, sz, tmin;
+    int coarse;
+    const int code = receiver_start(i, points, normals, ox, oy, oz, lx, ly, lz, eps, &sx, &sy, &sz, &tmin);
+    slot[i] = (code == WALK) ? atomic_inc(&counts[receiver_cell(views, brute_cell, sx, sy, sz, &coarse)]) : -1;
+    out[i] = (uchar)code;
+}
+
+/* Pass 2: every receiver with a slot writes its record at offsets[its cell] + its slot (offsets: the
+ * exclusive prefix sum of pass 1's counts). */
+__kernel void exact_bin_fill(BIN_ARGS, __global const int *offsets, __global const int *slot,
+                             __global float *binned)
+{
+    const int i = get_global_id(0);
+    if (i >= n || slot[i] < 0)
+        return;
+    float sx, sy, sz, tmin;
+    int coarse;
+    receiver_start(i, points, normals, ox, oy, oz, lx, ly, lz, eps, &sx, &sy, &sz, &tmin);
+    const int cell = receiver_cell(views, brute_cell, sx, sy, sz, &coarse);
+    __global float *r = binned + RECEIVER_FLOATS * (offsets[cell] + slot[i]);
+    r[0] = sx; r[1] = sy; r[2] = sz; r[3] = tmin;
+    r[4] = as_float(cell); r[5] = as_float(coarse); r[6] = as_float(i); r[7] = 0.0f;
+}
+
+/* A packet's lanes: their starts, directions to the light, intervals and watertight set-up */
+typedef struct {
+    lfloat sx, sy, sz, dx, dy, dz, tmin;
+#if !TEST_DOT5
+    WtRay ray;
+#endif
+} Packet;
+
+/* The lanes starting at s with interval (tmin, TMAX) towards the light */
+INLINE Packet packet(lfloat sx, lfloat sy, lfloat sz, lfloat tmin, float lx, float ly, float lz)
+{
+    Packet p;
+    p.sx = sx; p.sy = sy; p.sz = sz; p.tmin = tmin;
+#if LIGHT_POINT
+    p.dx = lx - sx; p.dy = ly - sy; p.dz = lz - sz;
+#else
+    p.dx = (lfloat)(-lx); p.dy = (lfloat)(-ly); p.dz = (lfloat)(-lz);
+#endif
+#if !TEST_DOT5
+    p.ray = wt_setup(p.sx, p.sy, p.sz, p.dx, p.dy, p.dz);
+#endif
+    return p;
+}
+
+/* The lanes triangle t shadows (every lane computes; the caller masks) */
+INLINE lint packet_hits(const Packet *p, __global const float *tris, int t)
+{
+#if TEST_DOT5
+    return dot5_hit(p->sx, p->sy, p->sz, p->dx, p->dy, p->dz, tris + DOT5_FLOATS * t, p->tmin, (lfloat)TMAX);
+#else
+    __global const float *r = tris + WT_FLOATS * t;
+    const lint culled = wt_culled(r, p->sx, p->sy, p->sz);
+    if (!LANE_ANY(!culled))
+        return (lint)0;
+    return (!culled) & wt_hit(&p->ray, r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8], p->tmin, (lfloat)TMAX);
+#endif
+}
+
+/* `hit` or'ed with the lanes in `active` that a triangle of cell c's list shadows (brute_cell's list:
+ * every triangle); stops when every active lane is shadowed. */
+INLINE lint walk_list(int c, lint active, lint hit, const Packet *p, __global const float *tris, int ntris,
+                      int brute_cell, __global const int *lists_a, __global const int *lists_b)
+{
+    active = active & !hit;
+    if (c == brute_cell) {
+        for (int t = 0; t < ntris && LANE_ANY(active); ++t) {
+            const lint h = active & packet_hits(p, tris, t);
+            hit = hit | h;
+            active = active & !h;
+        }
+        return hit;
+    }
+#if LISTS_LINKED
+    for (int node = lists_a[c]; node >= 0 && LANE_ANY(active); node = lists_b[2 * node + 1]) {
+        const lint h = active & packet_hits(p, tris, lists_b[2 * node]);
+#else
+    const int end = lists_a[c + 1];
+    for (int k = lists_a[c]; k < end && LANE_ANY(active); ++k) {
+        const lint h = active & packet_hits(p, tris, lists_b[k]);
+#endif
+        hit = hit | h;
+        active = active & !h;
+    }
+    return hit;
+}
+
+/* `hit` after walking, for each distinct cell among the valid lanes' `cell` (int per lane, -1: none),
+ * that cell's list with the lanes in it */
+INLINE lint walk_cells(const int *cell, lint valid, lint hit, const Packet *p, __global const float *tris,
+                       int ntris, int brute_cell, __global const int *lists_a, __global const int *lists_b)
+{
+    int done[LANES], valid_lane[LANES];
+    LANE_STORE(valid, valid_lane);
+    for (int j = 0; j < LANES; ++j)
+        done[j] = !valid_lane[j] || cell[j] < 0;
+    const lint cells = LANE_LOAD(int, cell);
+    for (int j = 0; j < LANES; ++j) {
+        if (done[j])
+            continue;
+        const int c = cell[j];
+        for (int k = j; k < LANES; ++k)
+            done[k] = done[k] || cell[k] == c;
+        hit = walk_list(c, valid & (cells == c), hit, p, tris, ntris, brute_cell, lists_a, lists_b);
+    }
+    return hit;
+}
+
+/* Pass 3. Contract: binned: nbinned records of pass 2; tris: triangle records (see TEST_DOT5); lists_a,
+ * lists_b: (offsets, items) or (heads, nodes) over the grid's cells; (lx, ly, lz): light position
+ * (relative) or direction. Writes out[index] for every binned receiver. */
+__kernel void exact_classify(__global const float *binned, int nbinned, __global const float *tris, int ntris,
+                             int brute_cell, __global const int *lists_a, __global const int *lists_b,
+                             float lx, float ly, float lz, __global uchar *out)
+{
+    const int base = LANES * get_global_id(0);
+    if (base >= nbinned)
+        return;
+    /* The lanes' records; lanes past the end repeat the last record and are not valid */
+    float sx[LANES], sy[LANES], sz[LANES], tmin[LANES];
+    int fine[LANES], coarse[LANES], index[LANES], lane[LANES];
+    for (int j = 0; j < LANES; ++j) {
+        __global const float *r = binned + RECEIVER_FLOATS * min(base + j, nbinned - 1);
+        sx[j] = r[0]; sy[j] = r[1]; sz[j] = r[2]; tmin[j] = r[3];
+        fine[j] = as_int(r[4]); coarse[j] = as_int(r[5]); index[j] = as_int(r[6]);
+        lane[j] = base + j;
+    }
+    const lint valid = LANE_LOAD(int, lane) < nbinned;
+    const Packet p = packet(LANE_LOAD(float, sx), LANE_LOAD(float, sy), LANE_LOAD(float, sz), LANE_LOAD(float, tmin),
+                            lx, ly, lz);
+    lint hit = walk_cells(fine, valid, (lint)0, &p, tris, ntris, brute_cell, lists_a, lists_b);
+#if COARSE
+    hit = walk_cells(coarse, valid, hit, &p, tris, ntris, brute_cell, lists_a, lists_b);
+#endif
+    int hit_lane[LANES];
+    LANE_STORE(hit, hit_lane);
+    for (int j = 0; j < LANES && base + j < nbinned; ++j)
+        out[index[j]] = (uchar)(hit_lane[j] != 0);
+}
+
+#if LANES == 1
+/* The caller's order instead, one receiver per work-item, fused (no binning): cheaper where walks are
+ * short and end early (exact.py's module docstring). Arguments as exact_bin_count's, then the walk's; writes out[i]
+ * and counts in *behind (zeroed) the points binned in brute_cell. */
+__kernel void exact_classify_points(BIN_ARGS, __global const float *tris, int ntris, __global const int *lists_a,
+                                    __global const int *lists_b, __global int *behind, __global uchar *out)
+{
+    const int i = get_global_id(0);
+    if (i >= n)
+        return;
+    float sx, sy, sz, tmin;
+    const int code = receiver_start(i, points, normals, ox, oy, oz, lx, ly, lz, eps, &sx, &sy, &sz, &tmin);
+    if (code != WALK) {
+        out[i] = (uchar)code;
+        return;
+    }
+    int coarse;
+    const int fine = receiver_cell(views, brute_cell, sx, sy, sz, &coarse);
+    if (fine == brute_cell)
+        atomic_inc(behind);
+    const Packet p = packet(sx, sy, sz, tmin, lx, ly, lz);
+    int hit = walk_list(fine, 1, 0, &p, tris, ntris, brute_cell, lists_a, lists_b);
+#if COARSE
+    if (coarse >= 0)
+        hit = walk_list(coarse, 1, hit, &p, tris, ntris, brute_cell, lists_a, lists_b);
+#endif
+    out[i] = (uchar)(hit != 0);
+}
+#endif
 
 /* Triangles as 9 floats each from relative float32 vertices and int faces (the corners are copied bit
  * for bit, so triangles sharing a vertex share its floats: what watertightness needs). */

@@ -47,97 +47,124 @@
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 #endif
 
+/* Every test below is written over lanes (vecmath.h): with LANES > 1 one triangle is tested against
+ * LANES rays at once, each lane bit for bit what the scalar test gives for its ray. */
+
 typedef struct {
-    float ox, oy, oz;           /* ray origin */
-    float dx, dy, dz;           /* direction */
-    int kx, ky, kz;             /* axis permutation: kz the dominant axis of the direction */
-    float xx, xy, xz;           /* shear row for x: e_kx - Sx e_kz */
-    float yx, yy, yz;           /* shear row for y: e_ky - Sy e_kz */
-    float zx, zy, zz;           /* scaled z row:   Sz e_kz */
+    lfloat ox, oy, oz;          /* ray origin */
+    lfloat dx, dy, dz;          /* direction */
+    lfloat xx, xy, xz;          /* shear row for x: e_kx - Sx e_kz (kz the dominant axis of D, kx, ky next) */
+    lfloat yx, yy, yz;          /* shear row for y: e_ky - Sy e_kz */
+    lfloat zx, zy, zz;          /* scaled z row:   Sz e_kz */
 } WtRay;
 
-/* Per-ray set-up of the watertight test for origin o and direction D (not necessarily unit). */
-INLINE WtRay wt_setup(float ox, float oy, float oz, float dx, float dy, float dz)
+/* Per-ray set-up of the watertight test for origin o and direction D (not necessarily unit). The
+ * permutation is (kz, kx, ky) = (0, 1, 2), (1, 2, 0) or (2, 0, 1), chosen per lane. */
+INLINE WtRay wt_setup(lfloat ox, lfloat oy, lfloat oz, lfloat dx, lfloat dy, lfloat dz)
 {
-    const float ax = SC_ABS(dx), ay = SC_ABS(dy), az = SC_ABS(dz);
-    const int kz = (ax >= ay && ax >= az) ? 0 : ((ay >= az) ? 1 : 2);
-    const int kx = (kz == 2) ? 0 : kz + 1;
-    const int ky = (kx == 2) ? 0 : kx + 1;
-    const float dkz = (kz == 0) ? dx : ((kz == 1) ? dy : dz);
-    const float dkx = (kx == 0) ? dx : ((kx == 1) ? dy : dz);
-    const float dky = (ky == 0) ? dx : ((ky == 1) ? dy : dz);
-    const float sz = 1.0f / dkz, sx = dkx * sz, sy = dky * sz;   /* one division: any consistent shear will do */
+    const lfloat ax = SC_LABS(dx), ay = SC_LABS(dy), az = SC_LABS(dz);
+    const lint k0 = (ax >= ay) & (ax >= az);
+    const lint k1 = !k0 & (ay >= az);
+    const lint k2 = !k0 & !k1;
+    const lfloat one = (lfloat)1.0f, zero = (lfloat)0.0f;
+    const lfloat dkz = k0 ? dx : (k1 ? dy : dz);
+    const lfloat dkx = k0 ? dy : (k1 ? dz : dx);
+    const lfloat dky = k0 ? dz : (k1 ? dx : dy);
+    const lfloat sz = one / dkz, sx = dkx * sz, sy = dky * sz;   /* one division: any consistent shear will do */
     WtRay r;
     r.ox = ox; r.oy = oy; r.oz = oz;
     r.dx = dx; r.dy = dy; r.dz = dz;
-    r.kx = kx; r.ky = ky; r.kz = kz;
-    r.xx = (kx == 0) ? 1.0f : ((kz == 0) ? -sx : 0.0f);
-    r.xy = (kx == 1) ? 1.0f : ((kz == 1) ? -sx : 0.0f);
-    r.xz = (kx == 2) ? 1.0f : ((kz == 2) ? -sx : 0.0f);
-    r.yx = (ky == 0) ? 1.0f : ((kz == 0) ? -sy : 0.0f);
-    r.yy = (ky == 1) ? 1.0f : ((kz == 1) ? -sy : 0.0f);
-    r.yz = (ky == 2) ? 1.0f : ((kz == 2) ? -sy : 0.0f);
-    r.zx = (kz == 0) ? sz : 0.0f;
-    r.zy = (kz == 1) ? sz : 0.0f;
-    r.zz = (kz == 2) ? sz : 0.0f;
+    r.xx = k2 ? one : (k0 ? -sx : zero);
+    r.xy = k0 ? one : (k1 ? -sx : zero);
+    r.xz = k1 ? one : (k2 ? -sx : zero);
+    r.yx = k1 ? one : (k0 ? -sy : zero);
+    r.yy = k2 ? one : (k1 ? -sy : zero);
+    r.yz = k0 ? one : (k2 ? -sy : zero);
+    r.zx = k0 ? sz : zero;
+    r.zy = k1 ? sz : zero;
+    r.zz = k2 ? sz : zero;
     return r;
 }
 
-#if WT_REFINE_F64
-INLINE double wt_axis(double x, double y, double z, int k) { return (k == 0) ? x : ((k == 1) ? y : z); }
+/* The hit's sign-folded interval test: t = T / det strictly inside (tmin, tmax), det != 0. */
+#define WT_IN_INTERVAL(T, det, tmin, tmax)                                                          \
+    ((((det) > 0) & ((T) > (tmin) * (det)) & ((T) < (tmax) * (det))) |                              \
+     (((det) < 0) & ((T) < (tmin) * (det)) & ((T) > (tmax) * (det))))
 
-/* The hit distance of a triangle the float32 test found inside, against (tmin, tmax), in double. */
-INLINE int wt_interval_f64(const WtRay *r, float v0x, float v0y, float v0z, float v1x, float v1y, float v1z,
-                           float v2x, float v2y, float v2z, float tmin, float tmax)
+#if WT_REFINE_F64
+/* The hit distance of a triangle the float32 test found inside, against (tmin, tmax), in double, for
+ * one ray (origin o, shear rows x, y, z): the same shear (its float32 rows are exact in double), the
+ * products and sums unrounded to float32. */
+INLINE int wt_interval_f64(float ox, float oy, float oz, float xx, float xy, float xz, float yx, float yy, float yz,
+                           float zx, float zy, float zz, float v0x, float v0y, float v0z, float v1x, float v1y,
+                           float v1z, float v2x, float v2y, float v2z, float tmin, float tmax)
 {
-    const double a0 = (double)v0x - r->ox, a1 = (double)v0y - r->oy, a2 = (double)v0z - r->oz;
-    const double b0 = (double)v1x - r->ox, b1 = (double)v1y - r->oy, b2 = (double)v1z - r->oz;
-    const double c0 = (double)v2x - r->ox, c1 = (double)v2y - r->oy, c2 = (double)v2z - r->oz;
-    const double dkz = wt_axis(r->dx, r->dy, r->dz, r->kz);
-    const double sx = wt_axis(r->dx, r->dy, r->dz, r->kx) / dkz, sy = wt_axis(r->dx, r->dy, r->dz, r->ky) / dkz;
-    const double az = wt_axis(a0, a1, a2, r->kz), bz = wt_axis(b0, b1, b2, r->kz), cz = wt_axis(c0, c1, c2, r->kz);
-    const double ax = wt_axis(a0, a1, a2, r->kx) - sx * az, ay = wt_axis(a0, a1, a2, r->ky) - sy * az;
-    const double bx = wt_axis(b0, b1, b2, r->kx) - sx * bz, by = wt_axis(b0, b1, b2, r->ky) - sy * bz;
-    const double cx = wt_axis(c0, c1, c2, r->kx) - sx * cz, cy = wt_axis(c0, c1, c2, r->ky) - sy * cz;
+    const double a0 = (double)v0x - ox, a1 = (double)v0y - oy, a2 = (double)v0z - oz;
+    const double b0 = (double)v1x - ox, b1 = (double)v1y - oy, b2 = (double)v1z - oz;
+    const double c0 = (double)v2x - ox, c1 = (double)v2y - oy, c2 = (double)v2z - oz;
+    const double ax = xx * a0 + xy * a1 + xz * a2, ay = yx * a0 + yy * a1 + yz * a2, az = zx * a0 + zy * a1 + zz * a2;
+    const double bx = xx * b0 + xy * b1 + xz * b2, by = yx * b0 + yy * b1 + yz * b2, bz = zx * b0 + zy * b1 + zz * b2;
+    const double cx = xx * c0 + xy * c1 + xz * c2, cy = yx * c0 + yy * c1 + yz * c2, cz = zx * c0 + zy * c1 + zz * c2;
     const double U = cx * by - cy * bx, V = ax * cy - ay * cx, W = bx * ay - by * ax;
     const double det = U + V + W;
-    const double T = (U * az + V * bz + W * cz) / dkz;           /* t = T / det in units of the direction */
-    const double sgn = (det < 0.0) ? -1.0 : 1.0;
-    const double Ts = T * sgn, ad = det * sgn;
-    return (Ts > tmin * ad) & (Ts < tmax * ad);
+    const double T = U * az + V * bz + W * cz;
+    return WT_IN_INTERVAL(T, det, (double)tmin, (double)tmax);
+}
+
+/* wt_interval_f64 for the lanes in `inside` (the others 0), one lane at a time: refinement is rare
+ * (only rays the float32 test finds inside), and PoCL's LLVM 14 miscompiled the same arithmetic on
+ * double8 vectors (68 of 4,000 masks wrong on the default scene) and could not lower double16. */
+INLINE lint wt_refine(const WtRay *r, lint inside, float v0x, float v0y, float v0z, float v1x, float v1y,
+                      float v1z, float v2x, float v2y, float v2z, lfloat tmin, lfloat tmax)
+{
+#if LANES == 1
+    return inside && wt_interval_f64(r->ox, r->oy, r->oz, r->xx, r->xy, r->xz, r->yx, r->yy, r->yz, r->zx, r->zy,
+                                     r->zz, v0x, v0y, v0z, v1x, v1y, v1z, v2x, v2y, v2z, tmin, tmax);
+#else
+    float ox[LANES], oy[LANES], oz[LANES], xx[LANES], xy[LANES], xz[LANES], yx[LANES], yy[LANES], yz[LANES];
+    float zx[LANES], zy[LANES], zz[LANES], t0[LANES], t1[LANES];
+    int in[LANES], out[LANES];
+    LANE_STORE(r->ox, ox); LANE_STORE(r->oy, oy); LANE_STORE(r->oz, oz);
+    LANE_STORE(r->xx, xx); LANE_STORE(r->xy, xy); LANE_STORE(r->xz, xz);
+    LANE_STORE(r->yx, yx); LANE_STORE(r->yy, yy); LANE_STORE(r->yz, yz);
+    LANE_STORE(r->zx, zx); LANE_STORE(r->zy, zy); LANE_STORE(r->zz, zz);
+    LANE_STORE(tmin, t0); LANE_STORE(tmax, t1); LANE_STORE(inside, in);
+    for (int j = 0; j < LANES; ++j)
+        out[j] = (in[j] && wt_interval_f64(ox[j], oy[j], oz[j], xx[j], xy[j], xz[j], yx[j], yy[j], yz[j], zx[j], zy[j],
+                                           zz[j], v0x, v0y, v0z, v1x, v1y, v1z, v2x, v2y, v2z, t0[j], t1[j])) ? -1 : 0;
+    return LANE_LOAD(int, out);
+#endif
 }
 #endif
 
 /* Watertight hit of triangle (v0, v1, v2) for tmin < t < tmax. */
-INLINE int wt_hit(const WtRay *r, float v0x, float v0y, float v0z, float v1x, float v1y, float v1z,
-                  float v2x, float v2y, float v2z, float tmin, float tmax)
+INLINE lint wt_hit(const WtRay *r, float v0x, float v0y, float v0z, float v1x, float v1y, float v1z,
+                   float v2x, float v2y, float v2z, lfloat tmin, lfloat tmax)
 {
-    const float a0 = v0x - r->ox, a1 = v0y - r->oy, a2 = v0z - r->oz;
-    const float b0 = v1x - r->ox, b1 = v1y - r->oy, b2 = v1z - r->oz;
-    const float c0 = v2x - r->ox, c1 = v2y - r->oy, c2 = v2z - r->oz;
+    const lfloat a0 = v0x - r->ox, a1 = v0y - r->oy, a2 = v0z - r->oz;
+    const lfloat b0 = v1x - r->ox, b1 = v1y - r->oy, b2 = v1z - r->oz;
+    const lfloat c0 = v2x - r->ox, c1 = v2y - r->oy, c2 = v2z - r->oz;
     /* Shear and scale the vertices */
-    const float ax = r->xx * a0 + r->xy * a1 + r->xz * a2, ay = r->yx * a0 + r->yy * a1 + r->yz * a2;
-    const float bx = r->xx * b0 + r->xy * b1 + r->xz * b2, by = r->yx * b0 + r->yy * b1 + r->yz * b2;
-    const float cx = r->xx * c0 + r->xy * c1 + r->xz * c2, cy = r->yx * c0 + r->yy * c1 + r->yz * c2;
-    const float az = r->zx * a0 + r->zy * a1 + r->zz * a2;
-    const float bz = r->zx * b0 + r->zy * b1 + r->zz * b2;
-    const float cz = r->zx * c0 + r->zy * c1 + r->zz * c2;
+    const lfloat ax = r->xx * a0 + r->xy * a1 + r->xz * a2, ay = r->yx * a0 + r->yy * a1 + r->yz * a2;
+    const lfloat bx = r->xx * b0 + r->xy * b1 + r->xz * b2, by = r->yx * b0 + r->yy * b1 + r->yz * b2;
+    const lfloat cx = r->xx * c0 + r->xy * c1 + r->xz * c2, cy = r->yx * c0 + r->yy * c1 + r->yz * c2;
     /* Edge functions; zero counts as inside for either orientation */
-    const float U = cx * by - cy * bx;
-    const float V = ax * cy - ay * cx;
-    const float W = bx * ay - by * ax;
-    const int inside = ((U >= 0.0f) & (V >= 0.0f) & (W >= 0.0f)) | ((U <= 0.0f) & (V <= 0.0f) & (W <= 0.0f));
+    const lfloat U = cx * by - cy * bx;
+    const lfloat V = ax * cy - ay * cx;
+    const lfloat W = bx * ay - by * ax;
+    const lint inside = ((U >= 0.0f) & (V >= 0.0f) & (W >= 0.0f)) | ((U <= 0.0f) & (V <= 0.0f) & (W <= 0.0f));
 #if WT_REFINE_F64
-    if (!inside)
-        return 0;
-    return wt_interval_f64(r, v0x, v0y, v0z, v1x, v1y, v1z, v2x, v2y, v2z, tmin, tmax);
+    if (!LANE_ANY(inside))
+        return inside;
+    return wt_refine(r, inside, v0x, v0y, v0z, v1x, v1y, v1z, v2x, v2y, v2z, tmin, tmax);
+#else
+    const lfloat az = r->zx * a0 + r->zy * a1 + r->zz * a2;
+    const lfloat bz = r->zx * b0 + r->zy * b1 + r->zz * b2;
+    const lfloat cz = r->zx * c0 + r->zy * c1 + r->zz * c2;
+    const lfloat det = U + V + W;
+    const lfloat T = U * az + V * bz + W * cz;
+    return inside & WT_IN_INTERVAL(T, det, tmin, tmax);
 #endif
-    /* Scaled hit distance against the interval, sign of det folded in */
-    const float det = U + V + W;
-    const float T = U * az + V * bz + W * cz;
-    const float sgn = (det < 0.0f) ? -1.0f : 1.0f;
-    const float Ts = T * sgn, ad = det * sgn;
-    return inside & (Ts > tmin * ad) & (Ts < tmax * ad);
 }
 
 /* Watertight triangle record (WT_FLOATS = 16 floats, one 64-byte line): the corners v0, v1, v2 as
@@ -152,21 +179,21 @@ INLINE int wt_hit(const WtRay *r, float v0x, float v0y, float v0z, float v1x, fl
  * test can hit. A segment through a shared edge or vertex crosses both planes there, so the cull never
  * removes one; it only skips triangles the segment does not reach. Degenerate triangles (n = 0) are
  * never culled (their test says no hit). */
-INLINE int wt_culled(__global const float *t, float sx, float sy, float sz)
+INLINE lint wt_culled(__global const float *t, lfloat sx, lfloat sy, lfloat sz)
 {
-    const float a0 = sx - t[0], a1 = sy - t[1], a2 = sz - t[2];
-    const float fs = t[9] * a0 + t[10] * a1 + t[11] * a2;
-    const float es = t[14] * (SC_ABS(a0) + SC_ABS(a1) + SC_ABS(a2));
-    const float fl = t[12], el = t[13];
-    return ((fs > es) & (fl > el)) | ((fs < -es) & (fl < -el));
+    const lfloat a0 = sx - t[0], a1 = sy - t[1], a2 = sz - t[2];
+    const lfloat fs = t[9] * a0 + t[10] * a1 + t[11] * a2;
+    const lfloat es = t[14] * (SC_LABS(a0) + SC_LABS(a1) + SC_LABS(a2));
+    const float fl = t[12], el = t[13];        /* the light's side: one per triangle */
+    return (fl > el) ? (fs > es) : ((fl < -el) ? (fs < -es) : (lint)0);
 }
 
 /* Dot5 triangle record: V0 (3), n = u x v (3), u (3), v (3), uu/den, uv/den, vv/den, pad (3): 16 floats.
  * Degenerate triangles are stored with n = 0 and zero coefficients: the plane distance is NaN, no hit. */
 #define DOT5_FLOATS 16
 
-INLINE int dot5_hit(float ox, float oy, float oz, float dx, float dy, float dz, __global const float *t,
-                    float tmin, float tmax)
+INLINE lint dot5_hit(lfloat ox, lfloat oy, lfloat oz, lfloat dx, lfloat dy, lfloat dz, __global const float *t,
+                     lfloat tmin, lfloat tmax)
 {
     const float p0x = t[0], p0y = t[1], p0z = t[2];
     const float nx = t[3], ny = t[4], nz = t[5];
@@ -174,12 +201,12 @@ INLINE int dot5_hit(float ox, float oy, float oz, float dx, float dy, float dz, 
     const float vx = t[9], vy = t[10], vz = t[11];
     const float uu = t[12], uv = t[13], vv = t[14];
     /* Plane intersection P_I = o + s D */
-    const float s = dot3(nx, ny, nz, p0x - ox, p0y - oy, p0z - oz) / dot3(nx, ny, nz, dx, dy, dz);
-    const float wx = ox + s * dx - p0x, wy = oy + s * dy - p0y, wz = oz + s * dz - p0z;
+    const lfloat s = (nx * (p0x - ox) + ny * (p0y - oy) + nz * (p0z - oz)) / (nx * dx + ny * dy + nz * dz);
+    const lfloat wx = ox + s * dx - p0x, wy = oy + s * dy - p0y, wz = oz + s * dz - p0z;
     /* The two per-ray dot products; u.u, u.v, v.v (over the denominator) are per triangle */
-    const float wu = dot3(wx, wy, wz, ux, uy, uz), wv = dot3(wx, wy, wz, vx, vy, vz);
-    const float bs = uv * wv - vv * wu;
-    const float bt = uv * wu - uu * wv;
+    const lfloat wu = wx * ux + wy * uy + wz * uz, wv = wx * vx + wy * vy + wz * vz;
+    const lfloat bs = uv * wv - vv * wu;
+    const lfloat bt = uv * wu - uu * wv;
     return (s > tmin) & (s < tmax) & (bs >= 0.0f) & (bt >= 0.0f) & (bs + bt <= 1.0f);
 }
 

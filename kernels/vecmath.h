@@ -33,6 +33,49 @@
 #define SC_CTZ(x) (31 - clz((x) & (0u - (x))))
 #endif
 
+/* Lanes: kernels that test one triangle against several receivers at once are written once over the
+ * types lfloat / lint / ldouble, which are float / int / double when LANES is 1 (the default) and
+ * OpenCL vectors of LANES elements otherwise (LANES = 4 or 8). Masks follow OpenCL's rule for the
+ * type: a scalar comparison gives 1 or 0, a vector one -1 or 0; code that is written with comparisons,
+ * &, |, ! and the ternary on masks (never ~ or arithmetic on them) means the same for both.
+ * LANE_ANY(m) is true when any lane of mask m is set; LANE_LOAD(type, p) / LANE_STORE(v, p) move LANES
+ * values between a private array and a lane value. All are written with swizzles, not any() or vloadn:
+ * PoCL calls its library for those (not inlined), and a call per triangle test cost more than the
+ * lanes saved. */
+#ifndef LANES
+#define LANES 1
+#endif
+#define SC_CAT_(a, b) a##b
+#define SC_CAT(a, b) SC_CAT_(a, b)
+#if LANES == 1
+#define SC_LANES_SUFFIX
+#define LANE_ANY(m) ((m) != 0)
+#define LANE_LOAD(type, p) ((p)[0])
+#define LANE_STORE(v, p) ((p)[0] = (v))
+#elif LANES == 4
+#define SC_LANES_SUFFIX 4
+#define LANE_ANY(m) (((m).s0 | (m).s1 | (m).s2 | (m).s3) != 0)
+#define LANE_LOAD(type, p) ((type##4)((p)[0], (p)[1], (p)[2], (p)[3]))
+#define LANE_STORE(v, p) ((p)[0] = (v).s0, (p)[1] = (v).s1, (p)[2] = (v).s2, (p)[3] = (v).s3)
+#elif LANES == 8
+#define SC_LANES_SUFFIX 8
+#define LANE_ANY(m) ((((m).lo | (m).hi).s0 | ((m).lo | (m).hi).s1 | ((m).lo | (m).hi).s2 | ((m).lo | (m).hi).s3) != 0)
+#define LANE_LOAD(type, p) ((type##8)((p)[0], (p)[1], (p)[2], (p)[3], (p)[4], (p)[5], (p)[6], (p)[7]))
+#define LANE_STORE(v, p)                                                                             \
+    ((p)[0] = (v).s0, (p)[1] = (v).s1, (p)[2] = (v).s2, (p)[3] = (v).s3, (p)[4] = (v).s4, (p)[5] = (v).s5, \
+     (p)[6] = (v).s6, (p)[7] = (v).s7)
+#else
+#error "LANES must be 1, 4 or 8"
+#endif
+#define LANE_TYPE(t) SC_CAT(t, SC_LANES_SUFFIX)
+typedef LANE_TYPE(float) lfloat;
+typedef LANE_TYPE(int) lint;
+#if defined(__clang__)
+#define SC_LABS(x) __builtin_elementwise_abs(x)   /* lfloat: a single instruction, not a library call */
+#else
+#define SC_LABS(x) fabs(x)
+#endif
+
 /* "Infinity" that stays finite: products with unit factors never overflow to inf or NaN. */
 #define SC_BIG 1.0e30f
 

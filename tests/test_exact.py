@@ -96,20 +96,21 @@ def reference_mask(seed, with_normals, light_name):
     return ref.shadow_mask(mesh.vertices, mesh.faces, LIGHTS[light_name], points, normals, default_eps(mesh.bounds))
 
 
+@pytest.mark.parametrize("order", ["cells", "caller"])
 @pytest.mark.parametrize("lists", ["csr", "linked"])
 @pytest.mark.parametrize("test", ["watertight", "dot5"])
 @pytest.mark.parametrize("with_normals", [False, True], ids=["points", "normals"])
 @pytest.mark.parametrize("light_name", list(LIGHTS))
-def test_random_scenes_match_reference(device, light_name, with_normals, test, lists):
+def test_random_scenes_match_reference(device, light_name, with_normals, test, lists, order):
     mesh, points, normals = random_scene(7, with_normals)
     light = LIGHTS[light_name]
-    mask, method = classify(mesh, light, points, normals, device=device, test=test, lists=lists)
+    mask, method = classify(mesh, light, points, normals, device=device, test=test, lists=lists, order=order)
     truth = reference_mask(7, with_normals, light_name)
     assert 0.05 < truth.mean() < 0.95                    # the scene is a real test
     if np.array_equal(mask, truth):
         return
     check_against_reference(mask, mesh, light, points, normals, default_eps(mesh.bounds),
-                            f"{light_name}/{test}/{lists}")
+                            f"{light_name}/{test}/{lists}/{order}")
 
 
 def test_view_kinds_of_the_random_lights(device):
@@ -406,14 +407,15 @@ def test_coplanar_overlapping_faces(device, rng):
     check_against_reference(mask, mesh, light, points, None, default_eps(mesh.bounds), "coplanar")
 
 
-def test_points_outside_the_prepared_window(device, rng):
+@pytest.mark.parametrize("order", ["cells", "caller"])
+def test_points_outside_the_prepared_window(device, rng, order):
     """Prepared for a small box of receivers, then asked about points anywhere: border cells (and, behind
     a single perspective view, a test against every triangle) keep the answer exact."""
     mesh = soup_mesh(rng, 200, 0.1)
     points = rng.uniform(-4, 4, (6000, 3))
     small = np.array([[-0.2, -1.5, -0.2], [0.2, -1.0, 0.2]])
     for light, kind in ((sc.PointLight((0.0, 3.0, 0.0)), "perspective"), (sc.DirectionalLight((0.1, -1, 0.2)), "orthographic")):
-        mask, method = classify(mesh, light, points, device=device, receiver_bounds=small)
+        mask, method = classify(mesh, light, points, device=device, receiver_bounds=small, order=order)
         assert method.stats["view_kind"] == kind
         if kind == "perspective":
             assert method.stats["brute_fallback"] > 0     # points above the light
@@ -583,7 +585,8 @@ def sliver_prism(n: int, height: float) -> sc.Mesh:
 @pytest.mark.parametrize("light", [sc.PointLight((3.0, 0.6, 1.0)), sc.PointLight((1.3, 1.2, 0.1)),
                                    sc.DirectionalLight((-1.0, -0.02, -0.3)), sc.DirectionalLight((0.01, -1.0, 0.02))],
                          ids=["point-side", "point-above", "directional-grazing", "directional-down"])
-def test_no_leaks_through_slivers(device, rng, n, height, light):
+@pytest.mark.parametrize("order", ["cells", "caller"])
+def test_no_leaks_through_slivers(device, rng, n, height, light, order):
     """Strips and fans of aspect ratio ~1e-4: receivers just inside the closed prism, behind float32 points
     of its shared edges, under grazing and steep lights. Every one is in shadow (it is inside a closed
     solid the light is outside of). Without the double-precision hit distance (WT_REFINE_F64) two of
@@ -607,5 +610,5 @@ def test_no_leaks_through_slivers(device, rng, n, height, light):
     inside = (radius < np.cos(np.pi / n) - 1e-6) & (points[:, 1] > 1e-6) & (points[:, 1] < height - 1e-6)
     points = points[inside]
     assert len(points) > 1000
-    mask = sc.shadow_mask(mesh, light, points, eps=1e-7, device=device)
+    mask = sc.shadow_mask(mesh, light, points, eps=1e-7, device=device, order=order)
     assert mask.all(), f"{int((~mask).sum())} of {len(points)} rays leak"

@@ -202,7 +202,7 @@ def test_prefix_sum_matches_numpy(device, rng, n):
     grid = ls.make_grid(views, resolution=4)
     builder = ls.ListBuilder(device)
     offsets = device.empty(4 * (n + 1))
-    total = builder._scan(grid, device.to_device(counts), n, offsets)
+    total = builder.prefix_sum(grid, device.to_device(counts), n, offsets)
     got = device.from_device(offsets, n + 1, np.int32)
     want = np.concatenate([[0], np.cumsum(counts)])
     assert total == want[-1]

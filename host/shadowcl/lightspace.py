@@ -394,7 +394,7 @@ class ListBuilder:
             queue.finish()
             t1 = time.perf_counter()
             offsets = dev.empty(4 * (cells + 1), "light-space offsets")
-            total = self._scan(grid, self._counts, cells, offsets)
+            total = self.prefix_sum(grid, self._counts, cells, offsets)
             t2 = time.perf_counter()
             limit = min(dev.max_alloc_bytes // 4, 2**31 - 1)
             if total > limit:
@@ -436,7 +436,7 @@ class ListBuilder:
         lists.params = params
         return lists
 
-    def _scan(self, grid: Grid, counts: cl.Buffer, n: int, offsets: cl.Buffer) -> int:
+    def prefix_sum(self, grid: Grid, counts: cl.Buffer, n: int, offsets: cl.Buffer) -> int:
         """offsets = exclusive prefix sum of counts (n + 1 entries); returns the total."""
         dev, queue = self.device, self.device.queue
         block = max(1024, -(-n // SCAN_BLOCKS))
