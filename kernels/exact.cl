@@ -213,7 +213,7 @@ INLINE lint packet_hits(const Packet *p, __global const float *tris, int t)
 
 /* `hit` or'ed with the lanes in `active` that a triangle of cell c's list shadows (brute_cell's list:
  * every triangle); stops when every active lane is shadowed. */
-INLINE lint walk_list(int c, lint active, lint hit, const Packet *p, __global const float *tris, int ntris,
+NOINLINE lint walk_list(int c, lint active, lint hit, const Packet *p, __global const float *tris, int ntris,
                       int brute_cell, __global const int *lists_a, __global const int *lists_b)
 {
     active = active & !hit;

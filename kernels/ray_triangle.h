@@ -114,7 +114,7 @@ INLINE int wt_interval_f64(float ox, float oy, float oz, float xx, float xy, flo
 /* wt_interval_f64 for the lanes in `inside` (the others 0), one lane at a time: refinement is rare
  * (only rays the float32 test finds inside), and PoCL's LLVM 14 miscompiled the same arithmetic on
  * double8 vectors (68 of 4,000 masks wrong on the default scene) and could not lower double16. */
-INLINE lint wt_refine(const WtRay *r, lint inside, float v0x, float v0y, float v0z, float v1x, float v1y,
+NOINLINE lint wt_refine(const WtRay *r, lint inside, float v0x, float v0y, float v0z, float v1x, float v1y,
                       float v1z, float v2x, float v2y, float v2z, lfloat tmin, lfloat tmax)
 {
 #if LANES == 1

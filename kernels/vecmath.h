@@ -13,6 +13,7 @@
 #pragma OPENCL FP_CONTRACT OFF
 
 #define INLINE inline __attribute__((always_inline))
+#define NOINLINE __attribute__((noinline))   /* code emitted once: large, rarely hot or called per list, not per triangle */
 
 /* Math through clang's builtins: PoCL does not inline the OpenCL library's fabs, fmin, fmax, floor and
  * sqrt (each is a call: measured 3x slower in a loop of them); the builtins become single instructions
