@@ -42,5 +42,10 @@ def aimed_receivers(mesh: Mesh, towards_light, per_edge: int, rng, light_positio
     # keep the receivers strictly inside every face plane, where the claim above holds.
     W = V.astype(np.float64)
     normals = np.cross(W[f[:, 1]] - W[f[:, 0]], W[f[:, 2]] - W[f[:, 0]])
-    heights = np.einsum("fk,pfk->pf", normals, receivers[:, None, :] - W[f[:, 0]][None])
-    return receivers[np.all(heights < 0, axis=1)]
+    offsets = np.einsum("fk,fk->f", normals, W[f[:, 0]])
+    inside = np.empty(len(receivers), dtype=bool)
+    chunk = max(1, (1 << 24) // len(f))          # receivers x faces heights per step: 128 MiB at most
+    for lo in range(0, len(receivers), chunk):
+        heights = receivers[lo:lo + chunk] @ normals.T - offsets
+        inside[lo:lo + chunk] = heights.max(axis=1) < 0
+    return receivers[inside]
