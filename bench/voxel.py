@@ -121,7 +121,7 @@ def measure_scene(device, name: str, cfg: dict) -> dict:
                 params = dict(resolution=resolution, determination=determination, connectivity=connectivity,
                               frame_buffer=True)
                 repeats = cfg["repeats"] if resolution <= 256 else 1      # 512, 1024: one run after the warm-up
-                prepared = timed(lambda: sc.prepare(scene, light, "voxel", bounds=box, device=device, eps=eps,
+                prepared = timed(lambda: sc.prepare(scene, light, "voxel", bounds=box, device=device,
                                                     **params), repeats)
                 shadows = prepared.result
                 classified = timed(lambda: shadows.mask(points, normals), cfg["repeats"])
@@ -140,7 +140,7 @@ def measure_scene(device, name: str, cfg: dict) -> dict:
                 if connectivity == 26:
                     self_mask, self_truth = np.zeros(len(points), bool), np.zeros(len(points), bool)
                     for single, rows, truth_alone in alone:
-                        self_mask[rows] = sc.prepare(single, light, "voxel", bounds=box, device=device, eps=eps,
+                        self_mask[rows] = sc.prepare(single, light, "voxel", bounds=box, device=device,
                                                      resolution=resolution, determination=determination,
                                                      grid_bounds=grid_box).mask(points[rows], normals[rows])
                         self_truth[rows] = truth_alone
@@ -159,7 +159,7 @@ def measure_scene(device, name: str, cfg: dict) -> dict:
     view2, normals2, _ = scene_receivers(scene, cfg["receivers"], seed=2)
     second = {}
     for frame_buffer in (True, False):
-        first_view, shadows = clock(lambda: sc.prepare(scene, light, "voxel", bounds=box, device=device, eps=eps,
+        first_view, shadows = clock(lambda: sc.prepare(scene, light, "voxel", bounds=box, device=device,
                                                       resolution=resolution, determination="topology",
                                                       frame_buffer=frame_buffer))
         first_view += clock(lambda: shadows.mask(points, normals))[0]

@@ -87,7 +87,9 @@ INLINE float lit_fraction(global const float *map, global const float *v, const 
  *      when NORMALS), to_light: the eye (PERSPECTIVE) or the unit direction towards the light;
  *      views (VIEW_FLOATS per view), map0..map5 (RES x RES depths, row-major: view k's map is mapk;
  *      a single view reads map0 only),
- *      bias = (constant, slope / offset coefficient) in texels, seed of the dither.
+ *      bias = (constant, slope / offset coefficient) in texels, eps: DESIGN.md's offset (the start
+ *      moves eps along the normal, and surfaces within eps of it along the ray do not shadow it),
+ *      seed of the dither.
  * Out: visibility[i] in [0, 1]: the filtered fraction of the light's depth samples that do not
  *      occlude receiver i; 0 for a normal facing away from the light (dot <= 0).
  * Assumes every point projects in front of its view (inside the receiver bounds the views were
@@ -95,7 +97,7 @@ INLINE float lit_fraction(global const float *map, global const float *v, const 
 kernel void shadow_visibility(global const float *points, global const float *normals, const float4 to_light,
                               global const float *views, global const float *map0, global const float *map1,
                               global const float *map2, global const float *map3, global const float *map4,
-                              global const float *map5, const float2 bias,
+                              global const float *map5, const float2 bias, const float eps,
                               const uint seed, const int n, global float *visibility)
 {
     const int gid = get_global_id(0);
@@ -130,9 +132,12 @@ kernel void shadow_visibility(global const float *points, global const float *no
      * unit. Perspective: texel size (tangent units) times the distance along the view axis (w); off
      * the axis by alpha a texel is that wide across the ray sideways, cos(alpha) narrower radially. */
 #if PERSPECTIVE
-    const float texel = v[16] * (v[12] * px + v[13] * py + v[14] * pz + v[15]);
+    const float axial = v[12] * px + v[13] * py + v[14] * pz + v[15];   /* distance along the view axis */
+    const float texel = v[16] * axial;
+    const float eps_axial = eps * axial / dist;   /* eps along the ray, as a distance along the axis */
 #else
     const float texel = v[16];
+    const float eps_axial = eps;
 #endif
 
     /* Facing test and bias */
@@ -145,6 +150,7 @@ kernel void shadow_visibility(global const float *points, global const float *no
         return;
     }
     const float sine = SC_SQRT(SC_MAX(1.0f - cosine * cosine, 0.0f));
+    px += eps * nx, py += eps * ny, pz += eps * nz;   /* DESIGN.md's start s = p + eps n */
 #if BIAS == 1
     offset += bias.y * texel * SC_MIN(sine / cosine, TAN_MAX);
 #elif BIAS == 2
@@ -168,5 +174,5 @@ kernel void shadow_visibility(global const float *points, global const float *no
 #endif
 
     /* Compare */
-    visibility[gid] = lit_fraction(map, v, s, t, distance_of(cz / cw, v) - offset);
+    visibility[gid] = lit_fraction(map, v, s, t, distance_of(cz / cw, v) - offset - eps_axial);
 }

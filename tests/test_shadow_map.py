@@ -61,7 +61,7 @@ def reference_visibility(method, points, normals, **perturbation):
     maps = method.maps
     return ref.visibility(points - maps.origin, normals, maps.kind, maps.to_light, maps.views, host_maps(method),
                           method.bias_texels().astype(np.float64), method.bias, method.filter, method.pcf_size,
-                          method.dither, method.seed, **perturbation)
+                          method.dither, method.seed, eps=method.eps, **perturbation)
 
 
 def ties(method, points, normals):
@@ -346,7 +346,8 @@ def test_shadow_mask_api_and_methods_listing(device, rng):
     facing_away = np.einsum("ij,ij->i", normals, LIGHTS["perspective"].direction_to_light(points)) <= 0
     assert mask[facing_away].all()
     listed = sc.methods()["shadow_map"]
-    assert set(listed) == set(ShadowMapMethod.parameters)
+    assert set(listed) == set(ShadowMapMethod.parameters) | {"eps"}
+    assert listed["eps"][1].startswith("honoured")
     assert (listed["bias"][0], listed["filter"][0], listed["resolution"][0]) == ("normal", "nearest", None)
     method = ShadowMapMethod(device)
     assert (method.bias, method.filter, method.resolution) == ("normal", "nearest", None)
@@ -427,3 +428,28 @@ def test_single_view_refuses_points_outside_its_bounds(device, rng):
         method.classify(np.array([[0.0, 3.0, 0.0]]), None)
     with pytest.raises(ValueError, match="points: contains NaN or inf"):
         method.classify(np.array([[0.0, np.nan, 0.0]]), None)
+
+
+@pytest.mark.parametrize("light", [sc.PointLight((0.4, 3.0, 0.3)), sc.DirectionalLight((0.3, -1.0, 0.2))],
+                         ids=["point", "directional"])
+def test_eps_is_honoured(device, light):
+    """DESIGN.md's eps, as the exact method reads it: a plate eps / 2 above a floor does not shadow the
+    floor under eps, and does under eps / 8 (normals or not; the margins, >= eps / 4 along the ray, are
+    larger than a texel's depth slope here); the kernel agrees with the reference."""
+    floor = sc.Mesh([(-2, 0, -2), (2, 0, -2), (2, 0, 2), (-2, 0, 2)], [(0, 2, 1), (0, 3, 2)])
+    rng = np.random.default_rng(5)
+    points = np.column_stack([rng.uniform(-0.3, 0.3, 2000), np.zeros(2000), rng.uniform(-0.3, 0.3, 2000)])
+    normals = np.broadcast_to([0.0, 1.0, 0.0], points.shape).copy()
+    eps = 0.02
+    plate = sc.Mesh([(-0.5, eps / 2, -0.5), (0.5, eps / 2, -0.5), (0.5, eps / 2, 0.5), (-0.5, eps / 2, 0.5)],
+                    [(0, 2, 1), (0, 3, 2)])
+    mesh = sc.Mesh.concatenate([floor, plate])
+    for given in (normals, None):
+        for e, shadowed in ((eps, False), (eps / 8, True)):
+            method = ShadowMapMethod(device, resolution=256, bias_scale=1e-3)
+            method.prepare(mesh, light, np.stack([points.min(0), points.max(0)]), e)
+            mask = method.classify(points, given)
+            exact = sc.shadow_mask(mesh, light, points, given, eps=e, device=device)
+            assert np.all(mask == shadowed) and np.all(exact == shadowed), (e, given is None, mask.mean(), exact.mean())
+            np.testing.assert_allclose(method.visibility(points, given), reference_visibility(method, points, given),
+                                       atol=0)

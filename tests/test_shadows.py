@@ -118,6 +118,25 @@ def test_voxel_method_through_prepare(device, rng):
     assert shadows.stats["device_bytes"] > 0
 
 
+def test_eps_is_honoured_or_refused_and_listed():
+    """Every method either honours eps or refuses one given (the voxel method: its voxel size sets the
+    offset), at every public entry point, and sc.methods() says which; the check comes before any work."""
+    listing = sc.methods()
+    assert all(entry["eps"][1].startswith(("honoured", "not honoured")) for entry in listing.values())
+    refusing = [name for name, entry in listing.items() if entry["eps"][1].startswith("not honoured")]
+    assert refusing == ["voxel"]
+    scene = sc.Scene.load(SCENES / "subdivision" / "torus.toml")
+    message = r"eps: the voxel method cannot honour eps"
+    with pytest.raises(ValueError, match=message):
+        sc.prepare(scene, scene.light, "voxel", eps=1e-3)
+    with pytest.raises(ValueError, match=message):
+        sc.shadow_mask(scene, scene.light, np.zeros((4, 3)), method="voxel", eps=1e-3)
+    with pytest.raises(ValueError, match=message):
+        sc.Renderer(scene, "voxel", eps=1e-3)
+    with pytest.raises(TypeError, match=r"eps: expected a number"):
+        sc.prepare(scene, scene.light, "exact", eps="1e-3")
+
+
 def test_shadow_volume_points_build_no_volume(device, rng):
     """The point query is the exact method on the light-facing faces: no silhouette, no volume."""
     scene = sc.Scene.load(SCENES / "default.toml")

@@ -29,6 +29,9 @@ Optional capabilities are declared on the class, never found by ``hasattr``:
 - ``own_renderer``: the method draws its own geometry (:meth:`Method.render_frame`).
 - ``bounded``: ``classify`` is right only inside the ``receiver_bounds`` given to ``prepare`` (a single
   shadow-map view); :class:`shadowcl.Shadows` then answers points outside by a second preparation.
+- ``eps_meaning``: how the method honours ``eps``, or None when it cannot (its own resolution sets the
+  offset): the public calls then refuse an ``eps`` other than None (:func:`resolve_eps`), and
+  :func:`methods` lists it as the method's ``eps`` entry.
 """
 
 from __future__ import annotations
@@ -38,7 +41,7 @@ import importlib
 
 import numpy as np
 
-from .checks import check_bounds
+from .checks import check_bounds, non_negative_float
 from .geometry import Mesh, bounds_diagonal
 from .lights import check_light
 
@@ -65,6 +68,7 @@ class Method(abc.ABC):
     image_space = False
     own_renderer = False
     bounded = False
+    eps_meaning: str | None = "as DESIGN.md: the segment starts eps along the normal and ignores hits within eps"
 
     def __init__(self, device, **params):
         unknown = sorted(set(params) - set(self.parameters))
@@ -119,8 +123,14 @@ def method_class(name: str) -> type[Method]:
 
 
 def methods() -> dict[str, dict[str, tuple]]:
-    """Every method's name and its parameters as ``{name: {parameter: (default, description)}}``."""
-    return {name: dict(method_class(name).parameters) for name in METHODS}
+    """Every method's name and its parameters as ``{name: {parameter: (default, description)}}``, with
+    an ``eps`` entry last that says whether and how the method honours ``eps``."""
+    listing = {}
+    for name in METHODS:
+        cls = method_class(name)
+        eps = f"honoured: {cls.eps_meaning}" if cls.eps_meaning else "not honoured: only eps=None is accepted"
+        listing[name] = {**cls.parameters, "eps": (None, eps)}
+    return listing
 
 
 def create_method(name: str, device=None, **params) -> Method:
@@ -156,6 +166,17 @@ def as_mesh(scene_or_mesh) -> Mesh:
 
 def default_eps(bounds: np.ndarray) -> float:
     return EPS_FRACTION * max(bounds_diagonal(bounds), np.finfo(np.float32).tiny)
+
+
+def resolve_eps(cls, eps, bounds: np.ndarray) -> float:
+    """The absolute eps of a public call to method ``cls``: the caller's, checked, else the default of
+    ``bounds``; ``ValueError`` when ``cls`` cannot honour an eps the caller gave."""
+    if eps is None:
+        return default_eps(bounds)
+    if cls.eps_meaning is None:
+        raise ValueError(f"eps: the {cls.name} method cannot honour eps (its resolution sets the offset); "
+                         f"leave eps=None")
+    return non_negative_float("eps", eps)
 
 
 def check_prepare(mesh, light, receiver_bounds, eps):

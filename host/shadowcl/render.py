@@ -16,11 +16,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import raster
-from .checks import non_negative_float, positive_int
+from .checks import positive_int
 from .device import get_device
 from .geometry import bounds_diagonal
 from .lights import check_light, same_light
-from .methods import default_eps, method_class, with_receiver_count
+from .methods import method_class, resolve_eps, with_receiver_count
 from .points import check_points
 from .scene import Scene
 from .shadows import Shadows
@@ -104,7 +104,8 @@ class Renderer:
         self.post_filter = positive_int("post_filter", post_filter, minimum=0, maximum=MAX_SIDE)
         if self.post_filter and self.method_class.own_renderer:
             raise ValueError(f"post_filter: method {method!r} renders its own geometry and has no post-filter")
-        self.eps = default_eps(scene.bounds) if eps is None else non_negative_float("eps", eps)
+        self.eps = resolve_eps(self.method_class, eps, scene.bounds)
+        self._eps_given = eps        # passed on as given: Shadows resolves it the same way (scene.bounds is the mesh's)
         self.device = get_device(device)
         self.method_class(self.device, **params)          # bad parameters raise here, not at the first frame
         self._params = params
@@ -178,7 +179,7 @@ class Renderer:
             else:
                 count = self.width * self.height if self._camera is None else len(self._camera[3])
                 params = with_receiver_count(self.method, self._params, count)   # sized by the first frame
-                self._slots.append(Shadows(self.scene, light, self.method, self.scene.bounds, self.device, self.eps,
+                self._slots.append(Shadows(self.scene, light, self.method, self.scene.bounds, self.device, self._eps_given,
                                            **params))
         return True
 

@@ -149,7 +149,9 @@ class ShadowMapMethod(Method):
     def prepare(self, mesh: Mesh, light, receiver_bounds: np.ndarray, eps: float) -> None:
         """Fit the light's view(s) to ``receiver_bounds`` and draw ``mesh``'s depth map in each the receivers reach.
 
-        ``eps`` is not used: the bias, in texel footprints, is what keeps a lit surface lit here.
+        ``eps`` is DESIGN.md's offset, honoured as the exact method does: a receiver with a normal
+        starts ``eps`` along it, and a surface within ``eps`` of the start along the ray does not shadow
+        it (on top of the bias, which covers the map's sampling).
         Raises ``ValueError`` when a map of ``resolution`` texels does not fit in one device buffer.
         """
         if not isinstance(mesh, Mesh):
@@ -172,6 +174,7 @@ class ShadowMapMethod(Method):
                               [None] * fitted.nviews, resolution)
         self._mesh, self._views_dev = mesh, self.device.to_device(records)
         self._receiver_bounds = receiver_bounds
+        self.eps = float(eps)
         self._draw(receiver_bounds - origin)
 
     def _draw(self, bounds: np.ndarray) -> None:
@@ -206,7 +209,8 @@ class ShadowMapMethod(Method):
         kernel(device.queue, (-(-n // _GROUP) * _GROUP,), (_GROUP,),
                device.to_device(relative), device.to_device(normals_np),
                np.array([*maps.to_light, 0.0], dtype=np.float32), self._views_dev,
-               *self._map_buffers(), self.bias_texels(), np.uint32(self.seed), np.int32(n), visibility_dev)
+               *self._map_buffers(), self.bias_texels(), np.float32(self.eps), np.uint32(self.seed), np.int32(n),
+               visibility_dev)
         return device.from_device(visibility_dev, n, np.float32)
 
     def _check_inside(self, box: np.ndarray) -> None:

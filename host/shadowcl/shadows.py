@@ -12,11 +12,11 @@ import time
 
 import numpy as np
 
-from .checks import check_bounds, non_negative_float
+from .checks import check_bounds
 from .device import get_device
 from .geometry import bounds_diagonal
 from .lights import check_light
-from .methods import as_mesh, default_eps, method_class, occluders, with_receiver_count
+from .methods import as_mesh, method_class, occluders, resolve_eps, with_receiver_count
 from .points import BOUNDS_SLACK, Points, check_points
 
 
@@ -37,7 +37,7 @@ class Shadows:
         self.light = check_light(light)
         cls = method_class(method)
         self.method = cls.name
-        self.eps = default_eps(mesh.bounds) if eps is None else non_negative_float("eps", eps)
+        self.eps = resolve_eps(cls, eps, mesh.bounds)
         self.bounds = mesh.bounds.astype(np.float64) if bounds is None else check_bounds("bounds", bounds)
         self._device = get_device(device)
         self._occluders = occluders(cls, scene_or_mesh)

@@ -103,6 +103,7 @@ class VoxelMethod(Method):
     name = "voxel"
     scene_input = True
     own_renderer = True
+    eps_meaning = None   # a sample's state is its voxel's: the voxel size, not eps, sets the offset
     parameters = {
         "resolution": (None, "voxels per side of the cubic frame buffer (<= 1024); None: 256 across the "
                              "receivers' box, clamped to 64..1024"),

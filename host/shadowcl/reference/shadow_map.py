@@ -12,7 +12,9 @@ method's host code: it takes the light's depth maps and view records as plain ar
    :func:`texel_footprint`). Orthographically it is the texel size.
 3. Bias (``bias = (constant, slope)`` in texels): the receiver may lie ``constant T`` behind the stored
    surface; "slope" adds ``slope T min(tan theta, 16)``; "normal" lifts it ``slope T sin theta`` along its
-   normal first. Without normals only the constant applies.
+   normal first. Without normals only the constant applies. ``eps`` (DESIGN.md): with normals the
+   receiver starts ``eps`` along its normal, and the receiver may lie ``eps`` (along the ray, as a
+   distance along the view axis) behind the stored surface on top of the bias.
 4. Transform by the view matrix into texel coordinates (centres at integers, row 0 at the top), add
    the dither (lowbias32 hash of ``seed`` and the index), and compare distances along the view axis:
    lit where the stored surface is not nearer than the receiver's distance minus the bias. Nearest:
@@ -105,7 +107,7 @@ def lit_fraction(depth_map, record, perspective, s, t, reach, filter, pcf_size=3
 
 
 def visibility(points_rel, normals, kind, to_light, views, depth, bias, bias_mode="slope", filter="bilinear",
-               pcf_size=3, dither=0, seed=0, perturb=(0.0, 0.0, 0.0)):
+               pcf_size=3, dither=0, seed=0, perturb=(0.0, 0.0, 0.0), eps=0.0):
     """(N,) visibility in [0, 1] of points relative to the maps' origin (see the module docstring).
 
     ``perturb`` = (ds, dt, relative reach change) moves every decision slightly: the tests call it
@@ -116,7 +118,8 @@ def visibility(points_rel, normals, kind, to_light, views, depth, bias, bias_mod
     perspective = kind != "orthographic"
     to_light = np.asarray(to_light, dtype=np.float64)
     light_dir = to_light - p if perspective else np.broadcast_to(to_light, p.shape)
-    light_dir = light_dir / np.linalg.norm(light_dir, axis=1, keepdims=True)
+    dist = np.linalg.norm(light_dir, axis=1)
+    light_dir = light_dir / dist[:, None]
     face = np.zeros(n, dtype=np.int64)
     if kind == "cube":
         e = p - to_light
@@ -125,12 +128,15 @@ def visibility(points_rel, normals, kind, to_light, views, depth, bias, bias_mod
     records = np.asarray(views, dtype=np.float64)[face]
     texel = texel_footprint(p, to_light, records, perspective)
     offset = bias[0] * texel
+    # eps along the ray, as a distance along the view axis (cos alpha = axial distance / ray distance)
+    offset = offset + (eps * texel / records[:, 16] / dist if perspective else eps)
     facing = np.ones(n, dtype=bool)
     if normals is not None:
         normals = np.asarray(normals, dtype=np.float64)
         cosine = np.einsum("ij,ij->i", normals, light_dir)
         facing = cosine > 0
         sine = np.sqrt(np.maximum(1 - cosine**2, 0))
+        p = p + eps * normals                           # the start s = p + eps n
         if bias_mode == "slope":
             with np.errstate(divide="ignore", invalid="ignore"):
                 offset = offset + bias[1] * texel * np.minimum(sine / cosine, TAN_MAX)
