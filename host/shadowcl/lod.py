@@ -253,20 +253,20 @@ def level_errors(device, mesh: Mesh, light, points, normals, eps: float, levels=
 
 
 # auto ------------------------------------------------------------------------------------------------
-def sample_size(max_error: float) -> int:
+def sample_size(max_error: float, pass_share: float = PASS_SHARE) -> int:
     """Calibration receivers for an error budget ``max_error`` (a fraction of receivers).
 
     A level passes when the one-sided 99 % Clopper-Pearson upper bound of its error is within the budget
     (so "auto" picks a level over budget with probability <= 1 %). The sample is large enough that a
-    level measured at :data:`PASS_SHARE` of the budget still passes: the normal approximation
+    level measured at ``pass_share`` (default :data:`PASS_SHARE`) of the budget still passes: the normal approximation
     ``n = z^2 r / ((1 - r)^2 b)`` (108,206 for ``b = 0.001``, ``r = 0.8``, ``z = 2.326``) grown in 1 %
     steps until the exact bound agrees: 128,158 receivers for ``b = 0.001``, an expected 128 wrong at the
     budget. Clamped to [MIN_SAMPLE, MAX_SAMPLE] (MAX_SAMPLE for b = 0, or any b below ~3e-4).
     """
     if max_error <= 0:
         return MAX_SAMPLE
-    n = math.ceil(CONFIDENCE_Z ** 2 * PASS_SHARE / ((1 - PASS_SHARE) ** 2 * max_error))
-    while n < MAX_SAMPLE and upper_bound(math.floor(PASS_SHARE * max_error * n), n) > max_error:
+    n = math.ceil(CONFIDENCE_Z ** 2 * pass_share / ((1 - pass_share) ** 2 * max_error))
+    while n < MAX_SAMPLE and upper_bound(math.floor(pass_share * max_error * n), n) > max_error:
         n = math.ceil(1.01 * n)
     return int(min(MAX_SAMPLE, max(MIN_SAMPLE, n)))
 

@@ -52,6 +52,7 @@ METHODS = {
     "angular": "shadowcl.angular:AngularMethod",
     "shadow_volume": "shadowcl.shadow_volume:ShadowVolumeMethod",
     "voxel": "shadowcl.voxel:VoxelMethod",
+    "auto": "shadowcl.auto:AutoMethod",
 }
 
 EPS_FRACTION = 1e-4  # default eps as a fraction of the scene's bounding-box diagonal (DESIGN.md)
@@ -145,6 +146,14 @@ def with_receiver_count(name: str, params: dict, count: int) -> dict:
     did not say: the one-shot calls know how many receivers are coming before they prepare."""
     if "expected_receivers" in method_class(name).parameters and params.get("expected_receivers") is None:
         return {**params, "expected_receivers": max(int(count), 1)}
+    return params
+
+
+def with_receivers(name: str, params: dict, receivers) -> dict:
+    """``params`` plus ``receivers=`` when method ``name`` calibrates on the caller's receivers ("auto") and
+    the caller did not say: the one-shot calls and the renderer know them before they prepare."""
+    if "receivers" in method_class(name).parameters and params.get("receivers") is None:
+        return {**params, "receivers": receivers}
     return params
 
 

@@ -20,7 +20,7 @@ from .checks import positive_int
 from .device import get_device
 from .geometry import bounds_diagonal
 from .lights import check_light, same_light
-from .methods import method_class, resolve_eps, with_receiver_count
+from .methods import method_class, resolve_eps, with_receiver_count, with_receivers
 from .points import check_points
 from .scene import Scene
 from .shadows import Shadows
@@ -179,6 +179,8 @@ class Renderer:
             else:
                 count = self.width * self.height if self._camera is None else len(self._camera[3])
                 params = with_receiver_count(self.method, self._params, count)   # sized by the first frame
+                if self._camera is not None:                                       # "auto" calibrates on them
+                    params = with_receivers(self.method, params, self._camera[3])
                 self._slots.append(Shadows(self.scene, light, self.method, self.scene.bounds, self.device, self._eps_given,
                                            **params))
         return True

@@ -16,7 +16,7 @@ from .checks import check_bounds
 from .device import get_device
 from .geometry import bounds_diagonal
 from .lights import check_light
-from .methods import as_mesh, method_class, occluders, resolve_eps, with_receiver_count
+from .methods import as_mesh, method_class, occluders, resolve_eps, with_receiver_count, with_receivers
 from .points import BOUNDS_SLACK, Points, check_points
 
 
@@ -146,5 +146,5 @@ def shadow_mask(scene_or_mesh, light, points, normals=None, method: str = "exact
         as_mesh(scene_or_mesh)
         method_class(method)(get_device(device), **params)   # bad parameters still raise
         return np.zeros(0, dtype=bool)
-    params = with_receiver_count(method, params, len(receivers))
+    params = with_receivers(method, with_receiver_count(method, params, len(receivers)), receivers)
     return prepare(scene_or_mesh, light, method, receivers.bounds, device, eps, **params).mask(receivers)

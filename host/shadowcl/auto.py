@@ -1,0 +1,222 @@
+"""``method="auto"``: the cheapest method and settings whose error meets a budget, on the caller's receivers.
+
+>>> mask = sc.shadow_mask(mesh, light, points, normals, method="auto", max_error=1e-3)
+>>> shadows = sc.prepare(mesh, light, method="auto", bounds=box, receivers=points)
+>>> shadows.params["chosen"], shadows.stats["calibration"]
+
+How the choice is made (:meth:`AutoMethod.prepare`):
+
+1. The exact method is prepared once for the whole receiver box: it is the ruler, and the answer when
+   nothing cheaper qualifies (so "auto" never prepares exact twice).
+2. The calibration sample: a seeded uniform random sample, without replacement, of the caller's own
+   receivers (``receivers=``: points, with their normals or their absence) -- every receiver has the
+   same weight, so the sample's error rate estimates the error over all of them. Its size comes from
+   the budget (:func:`shadowcl.lod.sample_size`); when that is more than :data:`SAMPLE_SHARE` of the
+   receivers (few receivers, or a tight budget: 1e-4 needs 174 k), the calibration would cost more than
+   any candidate can save, and exact is chosen at once. Without ``receivers``
+   (``sc.prepare`` with bounds only) the sample is uniform in the bounds, and ``params`` says so.
+   A spatially stratified sample was measured too costly for the 1.3x bar: keying and sorting 1.2 M
+   receivers by cell took 0.24-0.54 s, 35-75 % of exact's whole call on the loaded test machine.
+3. Exact classifies the sample (the truth) and its time per receiver is measured; candidates
+   (:data:`CANDIDATES`) are tried in order of their predicted cost, each prepared for the receiver box,
+   timed and measured on the sample. A candidate passes when the one-sided 99 % Clopper-Pearson upper
+   bound of its error rate (:func:`shadowcl.lod.upper_bound`) is within ``max_error``, and it is chosen
+   when its predicted time on all receivers also beats exact's. The search stops at the first
+   chosen, and before any trial predicted to push the calibration's spending past
+   :data:`OVERHEAD_SHARE` of exact's predicted time (or past ``max_time``): exact answers then, so the
+   overhead over exact is bounded by about that share plus one trial.
+
+A candidate that refuses the query (a method that cannot take the light) is skipped and listed so.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from .checks import non_negative_float, positive_float, positive_int
+from .methods import Method, method_class, with_receiver_count
+from .points import BOUNDS_SLACK, Points, check_points
+
+DEFAULT_MAX_ERROR = 1e-3
+PASS_SHARE = 0.5            # sample sized so that a candidate at half the budget passes (lod.sample_size)
+OVERHEAD_SHARE = 0.1        # calibration may spend this share of exact's predicted time on trials
+SAMPLE_SHARE = 0.05         # a sample above this share of the receivers costs more than a candidate can save
+BOUNDS_RECEIVERS = 1_000_000  # receivers assumed by a prepare without receivers or expected_receivers
+SAMPLE_SEED = 20261202
+
+# (method, parameters, prior prepare cost / exact's, prior per-receiver cost / exact's). The priors only
+# order the trials and gate them before they are measured; they are medians measured on this project's
+# test machine (torus, spheres, CSG box on a ground quad, 1.2 M receivers), not tuned to any result.
+CANDIDATES = (
+    ("shadow_map", {"resolution": 512}, 1.0, 0.4),
+    ("shadow_volume", {}, 0.2, 0.6),
+    ("shadow_map", {"resolution": 1024}, 1.5, 0.5),
+    ("shadow_map", {"resolution": 2048}, 3.0, 0.6),
+    ("angular", {}, 2.5, 0.8),
+    ("shadow_map", {"resolution": 4096}, 15.0, 0.8),
+)
+
+
+def calibration_sample(receivers: Points, count: int, seed: int = SAMPLE_SEED) -> Points:
+    """``count`` of ``receivers`` drawn uniformly without replacement (seeded), their normals with them."""
+    rng = np.random.default_rng(seed)
+    return receivers.subset(np.sort(rng.choice(len(receivers), size=count, replace=False)))
+
+
+def bounds_sample(bounds: np.ndarray, count: int, seed: int = SAMPLE_SEED) -> Points:
+    """``count`` points uniform in the box ``bounds``, without normals (seeded)."""
+    rng = np.random.default_rng(seed)
+    return check_points(bounds[0] + rng.random((count, 3)) * (bounds[1] - bounds[0]))
+
+
+def _timed_classify(instance: Method, sample: Points) -> tuple[np.ndarray, float]:
+    """``instance``'s answer on ``sample`` and the faster of two timed runs: one 20 k-receiver run on
+    the loaded 2-core test machine varied 3x between calls (a first run after prepare pays set-up)."""
+    seconds = []
+    for _ in range(2):
+        clock = time.perf_counter()
+        answer = instance.classify(sample)
+        seconds.append(time.perf_counter() - clock)
+    return answer, min(seconds)
+
+
+class AutoMethod(Method):
+    """The cheapest candidate within ``max_error`` on the caller's receivers (module docstring)."""
+
+    name = "auto"
+    parameters = {
+        "max_error": (DEFAULT_MAX_ERROR, "largest fraction of receivers that may be classified unlike the exact "
+                                         "method, with 99 % confidence"),
+        "max_time": (None, "seconds the calibration may spend trying candidates (None: bounded by exact's "
+                           "predicted time only)"),
+        "receivers": (None, "the receivers to calibrate on: points (N, 3), (points, normals) or a Points; "
+                            "shadow_mask and render pass theirs; None: a sample of the receiver bounds"),
+        "expected_receivers": (None, "how many receivers the answers will cover (None: len(receivers))"),
+    }
+
+    def __init__(self, device, **params):
+        super().__init__(device, **params)
+        p = self.params
+        self.max_error = non_negative_float("max_error", p["max_error"])
+        if self.max_error >= 1:
+            raise ValueError(f"max_error: must be below 1 (a fraction of receivers), got {self.max_error!r}")
+        self.max_time = None if p["max_time"] is None else positive_float("max_time", p["max_time"])
+        given = p["receivers"]
+        if given is None or isinstance(given, Points):
+            self.receivers = given
+        elif isinstance(given, tuple) and len(given) == 2:
+            self.receivers = check_points(*given)
+        else:
+            self.receivers = check_points(given)
+        expected = p["expected_receivers"]
+        self.expected = None if expected is None else positive_int("expected_receivers", expected)
+        self.chosen: Method | None = None
+        self._exact: Method | None = None
+        self._chosen_params: dict = {}
+        self._bounds = None
+
+    # choice --------------------------------------------------------------------------------------------
+    def prepare(self, occluders, light, receiver_bounds, eps: float) -> None:
+        from .lod import sample_size, upper_bound
+
+        start = time.perf_counter()
+        box = np.asarray(receiver_bounds, dtype=np.float64)
+        self._bounds = box
+        total = self.expected or (len(self.receivers) if self.receivers is not None else BOUNDS_RECEIVERS)
+        needed = sample_size(self.max_error, PASS_SHARE)
+        exact_cls = method_class("exact")
+        self._exact = exact_cls(self.device, **with_receiver_count("exact", {}, total))
+        clock = time.perf_counter()
+        self._exact.prepare(occluders, light, box, eps)
+        self.device.queue.finish()
+        exact_prepare = time.perf_counter() - clock
+        tried = []
+        calibration = {"max_error": self.max_error, "receivers": total, "sample": 0, "source": None,
+                       "exact_prepare_s": exact_prepare, "trials_s": 0.0, "tried": tried}
+        self.chosen, self._chosen_params = self._exact, {"method": "exact"}
+        if needed > SAMPLE_SHARE * total:
+            calibration["source"] = (f"none: the budget needs {needed:,} sample receivers, more than "
+                                     f"{SAMPLE_SHARE:.0%} of {total:,}, so exact answers")
+        else:
+            if self.receivers is None:
+                sample = bounds_sample(box, needed)
+                calibration["source"] = "uniform in the receiver bounds (no receivers given), no normals"
+            else:
+                sample = calibration_sample(self.receivers, needed)
+                calibration["source"] = (f"uniform sample of the caller's {len(self.receivers):,} receivers, "
+                                         f"{'with' if sample.normals is not None else 'without'} normals")
+            calibration["sample"] = len(sample)
+            truth, exact_seconds = _timed_classify(self._exact, sample)
+            exact_rate = exact_seconds / len(sample)
+            exact_remaining = total * exact_rate             # exact's cost still to pay on all receivers
+            allowance = OVERHEAD_SHARE * (exact_prepare + exact_remaining)
+            if self.max_time is not None:
+                allowance = min(allowance, self.max_time)
+            calibration["exact_predicted_s"] = exact_prepare + exact_remaining
+            spent = 0.0
+            order = sorted(CANDIDATES, key=lambda c: c[2] * exact_prepare + total * c[3] * exact_rate)
+            for name, settings, prior_prepare, prior_rate in order:
+                trial = prior_prepare * exact_prepare + len(sample) * prior_rate * exact_rate
+                if spent + trial > allowance or trial + total * prior_rate * exact_rate >= exact_remaining:
+                    tried.append({"method": name, **settings, "skipped": "predicted too slow to beat exact"})
+                    continue
+                record, instance = self._trial(name, settings, occluders, light, box, eps, sample, truth, total)
+                spent += record.get("prepare_s", 0.0) + record.get("sample_s", 0.0)
+                tried.append(record)
+                if "error" not in record:
+                    continue
+                record["upper_bound"] = upper_bound(record["wrong"], len(sample))
+                record["passes"] = record["upper_bound"] <= self.max_error
+                if record["passes"] and record["predicted_s"] < exact_remaining:
+                    self.chosen, self._chosen_params = instance, {"method": name, **instance.resolved_params()}
+                    calibration.update(error=record["error"], upper_bound=record["upper_bound"])
+                    break
+            if self.chosen is self._exact:
+                calibration.update(error=0.0, upper_bound=0.0)
+            calibration["trials_s"] = spent
+        calibration["seconds"] = time.perf_counter() - start
+        self.stats = {"chosen": self._chosen_params["method"], "calibration": calibration,
+                      "device_bytes": self.chosen.stats.get("device_bytes", 0)}
+
+    def _trial(self, name, settings, occluders, light, box, eps, sample, truth, total):
+        """Prepare candidate ``name`` with ``settings``, classify the sample: (record, instance or None)."""
+        record = {"method": name, **settings}
+        instance = method_class(name)(self.device, **with_receiver_count(name, settings, total))
+        clock = time.perf_counter()
+        try:
+            instance.prepare(occluders, light, box, eps)
+            self.device.queue.finish()
+        except ValueError as error:          # the method cannot answer this query (e.g. refuses the light)
+            record["refused"] = str(error)
+            return record, None
+        record["prepare_s"] = time.perf_counter() - clock
+        answer, record["sample_s"] = _timed_classify(instance, sample)
+        wrong = int(np.count_nonzero(answer != truth))
+        record.update(wrong=wrong, error=wrong / len(sample),
+                      predicted_s=total * record["sample_s"] / len(sample))
+        return record, instance
+
+    # queries -------------------------------------------------------------------------------------------
+    def classify(self, points, normals=None) -> np.ndarray:
+        receivers = check_points(points, normals)
+        if not self.chosen.bounded:
+            return self.chosen.classify(receivers)
+        # a bounded candidate (one shadow-map view) is right inside the prepared box only: exact answers the rest
+        slack = BOUNDS_SLACK * float(np.linalg.norm(self._bounds[1] - self._bounds[0]))
+        p = receivers.positions
+        outside = np.any((p < self._bounds[0] - slack) | (p > self._bounds[1] + slack), axis=1)
+        if not outside.any():
+            return self.chosen.classify(receivers)
+        answer = self._exact.classify(receivers) if outside.all() else np.empty(len(receivers), dtype=bool)
+        if not outside.all():      # (an empty subset with normals trips Points.unit_normals: not asked)
+            answer[~outside] = self.chosen.classify(receivers.subset(~outside))
+            answer[outside] = self._exact.classify(receivers.subset(outside))
+        return answer
+
+    def resolved_params(self) -> dict:
+        """The budget and the choice: ``chosen`` is the method and its parameters as used."""
+        source = None if self.receivers is None else f"{len(self.receivers):,} receivers"
+        return {"max_error": self.max_error, "max_time": self.max_time, "receivers": source,
+                "expected_receivers": self.expected, "chosen": dict(self._chosen_params)}
