@@ -134,3 +134,12 @@ def test_listed_and_bad_budgets_refused(device):
         sc.shadow_mask(mesh, light, points, method="auto", max_time=0, device=device)
     with pytest.raises(ValueError, match="points"):
         sc.prepare(mesh, light, "auto", device=device, receivers=np.zeros((4, 2)))
+
+
+def test_cli_prints_the_choice(tmp_path, capsys):
+    from shadowcl.cli import main
+
+    out = tmp_path / "auto.png"
+    assert main(["render", "--out", str(out), "--size", "640x480", "--method", "auto", "--param", "max_error=0.01"]) == 0
+    printed = capsys.readouterr().out
+    assert "light 0: auto chose " in printed and "for budget 0.01" in printed and "; sample: " in printed

@@ -43,6 +43,7 @@ class RenderResult:
     visibility: np.ndarray  # (L, M) float32 in [0, 1], what shading used (1 - shadow for boolean methods)
     timings: dict[str, float] = field(default_factory=dict)  # seconds per stage
     reused: dict = field(default_factory=dict)  # what a Renderer kept from its last frame (see Renderer)
+    shadows: list = field(default_factory=list)  # per light, the prepared Shadows (params, stats: what "auto" chose)
 
     @property
     def covered(self) -> np.ndarray:
@@ -164,6 +165,7 @@ class Renderer:
                     visibility = np.stack([_box_filter(seen, v, self.post_filter) for v in visibility])
                 image = shade(self.scene.triangle_colors, lights, view, seen, visibility)
             result = RenderResult(image=image, receivers=seen, shadow=shadow, visibility=visibility, timings=timings)
+        result.shadows = list(slots)
         result.reused = {"camera": bool(reused_camera and not own),
                          "prepared": [not fresh for fresh in prepared]}
         self.report = result
