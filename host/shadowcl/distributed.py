@@ -63,6 +63,9 @@ def run_on_cluster(job, kind: str, client, progress: bool) -> np.ndarray:
     from dask.distributed import as_completed
     from tqdm import tqdm
 
+    if isinstance(client, str):                      # a client of our own, closed when done
+        with connect(client) as own:
+            return run_on_cluster(job, kind, own, progress)
     client = connect(client)
     cls = method_class(job.method)
     geometry = job.scene_or_mesh if cls.scene_input else as_mesh(job.scene_or_mesh)
