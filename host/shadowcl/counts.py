@@ -18,9 +18,11 @@ from __future__ import annotations
 import numpy as np
 
 from .checks import positive_int
+from .device import get_device
 from .lights import DirectionalLight, PointLight, check_light
 from .methods import as_mesh, method_class, resolve_eps, with_receiver_count
 from .points import Points, check_points
+from .shadows import Shadows
 
 BATCH = 16   # lights per batch: a Dask task's unit of work and of loss when a worker dies
 
@@ -34,8 +36,6 @@ class LightLoop:
     """
 
     def __init__(self, scene_or_mesh, receivers: Points, method: str, eps: float, device=None, **params):
-        from .shadows import Shadows
-
         self.scene_or_mesh, self.receivers, self.method = scene_or_mesh, receivers, method
         self.eps, self.device = eps, device
         self.params = with_receiver_count(method, params, len(receivers))
@@ -43,8 +43,6 @@ class LightLoop:
 
     def masks(self, lights):
         """bool (N,) per light of ``lights``, in order (the structure built for the first light, then relit)."""
-        from .shadows import Shadows
-
         for light in lights:
             if self._shadows is None:
                 self._shadows = Shadows(self.scene_or_mesh, light, self.method, self.receivers.bounds,
@@ -81,7 +79,7 @@ def shadow_counts(scene_or_mesh, lights, points, normals=None, method: str = "ex
     (:mod:`shadowcl.distributed`); the result is the same bit for bit. ``progress`` shows a tqdm bar
     over the lights.
     """
-    job = _Job(scene_or_mesh, lights, points, normals, method, weights, device, eps, batch, params)
+    job = LightJob(scene_or_mesh, lights, points, normals, method, weights, device, eps, batch, params)
     return job.run("counts", client, progress)
 
 
@@ -93,11 +91,11 @@ def shadow_matrix(scene_or_mesh, lights, points, normals=None, method: str = "ex
     Arguments as :func:`shadow_counts` (without ``weights``). ``np.unpackbits(matrix, axis=1,
     count=N).astype(bool)`` gives the (L, N) masks back.
     """
-    job = _Job(scene_or_mesh, lights, points, normals, method, None, device, eps, batch, params)
+    job = LightJob(scene_or_mesh, lights, points, normals, method, None, device, eps, batch, params)
     return job.run("packed", client, progress)
 
 
-class _Job:
+class LightJob:
     """The arguments of a many-lights call, checked once, and its batches run here or on a cluster."""
 
     def __init__(self, scene_or_mesh, lights, points, normals, method, weights, device, eps, batch, params):
@@ -106,7 +104,7 @@ class _Job:
         self.receivers = check_points(points, normals)
         mesh = as_mesh(scene_or_mesh)
         cls = method_class(method)
-        cls(_probe_device(device), **params)                   # bad parameters raise here, before any work
+        cls(get_device(device), **params)                      # bad parameters raise here, before any work
         self.scene_or_mesh, self.method, self.device, self.params = scene_or_mesh, cls.name, device, params
         self.eps = resolve_eps(cls, eps, mesh.bounds)
         self.batch = positive_int("batch", batch)
@@ -181,11 +179,6 @@ def check_weights(weights, count: int) -> np.ndarray:
     if not np.all(np.isfinite(array)):
         raise ValueError(f"weights: must be finite (first bad at index {int(np.flatnonzero(~np.isfinite(array))[0])})")
     return array
-
-
-def _probe_device(device):
-    from .device import get_device
-    return get_device(device)
 
 
 def _bar(progress: bool, total: int):

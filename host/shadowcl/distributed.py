@@ -22,6 +22,7 @@ import numpy as np
 
 from .counts import LightLoop, run_batch
 from .methods import as_mesh, method_class
+from .points import check_points
 
 # PoCL's thread count per process: POCL_CPU_MAX_CU_NUM in current PoCL, POCL_MAX_PTHREAD_COUNT in the
 # PoCL 3.x that pyopencl's wheels bundle (checked: max_compute_units follows it).
@@ -59,7 +60,7 @@ def connect(client):
 
 
 def run_on_cluster(job, kind: str, client, progress: bool) -> np.ndarray:
-    """Run a :class:`shadowcl.counts._Job`'s batches on the cluster of ``client``; the local run's result."""
+    """Run a :class:`shadowcl.counts.LightJob`'s batches on the cluster of ``client``; the local run's result."""
     from dask.distributed import as_completed
     from tqdm import tqdm
 
@@ -95,7 +96,6 @@ def _batch_task(run: str, data, method: str, eps: float, params: dict, kind: str
     if loop is None:
         _limit_pocl_threads()
         geometry, positions, normals = data
-        from .points import check_points
         _loops.clear()
         loop = _loops[run] = LightLoop(geometry, check_points(positions, normals), method, eps, **params)
     return run_batch(loop, kind, lights, weights)

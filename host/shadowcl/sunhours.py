@@ -80,15 +80,18 @@ def heat_map(points: np.ndarray, hours: np.ndarray, path: Path, title: str, up=U
     span = max(np.ptp(x), np.ptp(y), 1e-9)
     spacing = _typical_spacing(x, y)
     pixel = max(spacing, span / HEAT_MAP_PIXELS)
-    width, rows = int(np.ptp(x) / pixel) + 1, int(np.ptp(y) / pixel) + 1
+    # lattice points are pixel centres: rounded, not floored (a roof's points, lifted from float32
+    # corners, sit a rounding error off the lattice, and flooring put half of them a pixel off)
+    width, rows = int(np.rint(np.ptp(x) / pixel)) + 1, int(np.rint(np.ptp(y) / pixel)) + 1
     image = np.full((rows, width), np.nan)
     order = np.argsort(height, kind="stable")               # the highest sensor in a pixel is drawn last
-    col = ((x[order] - x.min()) / pixel).astype(int)
-    row = ((y[order] - y.min()) / pixel).astype(int)
+    col = np.rint((x[order] - x.min()) / pixel).astype(int)
+    row = np.rint((y[order] - y.min()) / pixel).astype(int)
     image[row, col] = hours[order]
     figure, axes = plt.subplots(figsize=(8, 7), dpi=120)
+    half = pixel / 2
     shown = axes.imshow(image, origin="lower", cmap="inferno", interpolation="nearest",
-                        extent=(x.min(), x.min() + width * pixel, y.min(), y.min() + rows * pixel))
+                        extent=(x.min() - half, x.min() - half + width * pixel, y.min() - half, y.min() - half + rows * pixel))
     figure.colorbar(shown, ax=axes, label="hours of direct sun")
     axes.set_xlabel("east")
     axes.set_ylabel("north")
