@@ -15,7 +15,7 @@ import pytest
 from manifold3d import Manifold
 
 import shadowcl as sc
-from conftest import PROJECT
+from conftest import PROJECT, SCENES
 from shadowcl.methods import default_eps
 
 distributed = pytest.importorskip("dask.distributed")
@@ -65,6 +65,20 @@ def test_counts_are_the_sum_of_the_masks(method, params, with_normals, rng):
     assert matrix.dtype == np.uint8 and matrix.shape == (3, 126)
     np.testing.assert_array_equal(matrix, np.packbits(masks, axis=1))
     assert 0 < counts.mean() < 3, "some points shadowed, not all: the test can tell a wrong mask"
+
+
+@pytest.mark.filterwarnings("ignore:voxel")   # points in the box far from the surface are lit, and it says so
+def test_counts_of_the_voxel_method_on_a_subdivision_surface(rng):
+    """The voxel method takes the scene (its subdivision surfaces), not a mesh, and refuses an eps:
+    counts = sum of its masks."""
+    scene = sc.Scene.load(SCENES / "subdivision" / "torus.toml")
+    low, high = scene.bounds
+    points = rng.uniform(low, high, (1001, 3))
+    lights = [sc.PointLight((x, high[1] + 3, z)) for x, z in rng.uniform(-2, 2, (3, 2))]
+    masks = np.array([sc.shadow_mask(scene, light, points, method="voxel", resolution=32) for light in lights])
+    counts = sc.shadow_counts(scene, lights, points, method="voxel", resolution=32, batch=2)
+    np.testing.assert_array_equal(counts, masks.sum(axis=0))
+    assert 0 < counts.mean() < 3
 
 
 def test_weights_sum_in_light_order(rng):

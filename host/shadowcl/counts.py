@@ -30,12 +30,12 @@ BATCH = 16   # lights per batch: a Dask task's unit of work and of loss when a w
 class LightLoop:
     """One method prepared once for a scene and a fixed set of receivers, then relit light by light.
 
-    ``receivers`` is a checked :class:`~shadowcl.points.Points`; ``eps`` absolute (already resolved
-    against the whole scene, so that every process uses the same one). :meth:`masks` yields each
+    ``receivers`` is a checked :class:`~shadowcl.points.Points`; ``eps`` as the caller gave it (None: the
+    default of the scene's bounds, the same in every process). :meth:`masks` yields each
     light's bool mask; :meth:`counts` sums them, weighted, as float64.
     """
 
-    def __init__(self, scene_or_mesh, receivers: Points, method: str, eps: float, device=None, **params):
+    def __init__(self, scene_or_mesh, receivers: Points, method: str, eps: float | None, device=None, **params):
         self.scene_or_mesh, self.receivers, self.method = scene_or_mesh, receivers, method
         self.eps, self.device = eps, device
         self.params = with_receiver_count(method, params, len(receivers))
@@ -106,7 +106,8 @@ class LightJob:
         cls = method_class(method)
         cls(get_device(device), **params)                      # bad parameters raise here, before any work
         self.scene_or_mesh, self.method, self.device, self.params = scene_or_mesh, cls.name, device, params
-        self.eps = resolve_eps(cls, eps, mesh.bounds)
+        resolve_eps(cls, eps, mesh.bounds)                     # a bad eps raises here; None stays None, so
+        self.eps = eps                                         # that a method refusing an eps gets none
         self.batch = positive_int("batch", batch)
 
     def batches(self) -> list[slice]:
