@@ -183,6 +183,26 @@ def test_worker_killed_mid_run_gives_the_same_counts(client, rng):
     client.wait_for_workers(2, timeout=60)    # the nanny restarts the worker for the next tests
 
 
+def test_sun_hours_command_on_the_cluster(client, tmp_path):
+    """shadowcl sun-hours --scheduler ADDR gives the local run's hours (and --workers 0 is refused)."""
+    pytest.importorskip("pvlib")
+    from shadowcl.cli import main
+
+    scene_file = tmp_path / "tower.toml"
+    scene_file.write_text('[[lights]]\ntype = "directional"\ndirection = [0, -1, 0]\n'
+                          '[[objects]]\nname = "ground"\nbox = { size = [10, 1, 10], center = true }\n'
+                          '[[objects]]\nname = "tower"\nbox = { size = [1, 3, 1] }\n'
+                          "[[sensors]]\nobjects = ['ground', 'tower']\nspacing = 1.0\n")
+    period = ["--lat", "52.5", "--lon", "13.4", "--start", "2026-09-01", "--end", "2026-09-02", "--step", "2h"]
+    assert main(["sun-hours", str(scene_file), *period, "--out", str(tmp_path / "local.png")]) == 0
+    assert main(["sun-hours", str(scene_file), *period, "--scheduler", client.scheduler.address,
+                 "--out", str(tmp_path / "cluster.png")]) == 0
+    hours = np.load(tmp_path / "local.npy")
+    np.testing.assert_array_equal(np.load(tmp_path / "cluster.npy"), hours)
+    assert 0 < hours.mean() < hours.max()
+    assert main(["sun-hours", str(scene_file), *period, "--workers", "0", "--out", str(tmp_path / "x.png")]) == 2
+
+
 # Bad input ---------------------------------------------------------------------------------------------------
 LIGHT = sc.DirectionalLight((0, -1, 0))
 BAD = [
