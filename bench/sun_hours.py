@@ -161,20 +161,26 @@ def cluster_costs(client, scene, points, normals, year) -> dict:
 
 
 def predict(rows, overhead, lights: int, sensors: int) -> dict:
-    """The year on W single-thread workers (W = 1 core each): the cluster's per-sun time on one worker,
-    plus per batch its overhead, plus the client's intake of every batch's result (the serial part)
-    at the LocalCluster's measured scatter rate, plus the scatter to W workers (one copy each)."""
+    """The year on W single-thread workers (W = 1 core each), from what the LocalCluster measured:
+
+    - compute: the cluster's per-sun time on one worker, shared by W, plus the overhead of each batch;
+    - reduce: the batches' counts summed on the workers in a binary tree (``PairwiseSum``): each sum
+      moves one batch result between workers, W transfers at a time, then the tree's last log2 levels
+      one after another; the client receives one array;
+    - scatter: one copy of the scene and sensors to each worker from the client.
+    Transfers at the LocalCluster's measured scatter rate (loopback, under the run's load)."""
     cluster = next(r for r in rows if r["tool"].startswith("exact, LocalCluster"))
     per_sun_one_worker = 2 * cluster["per_sun_s"]           # two workers ran it
     batches = -(-lights // BATCH)
     rate = overhead["scattered_bytes"] * 2 / max(overhead["scatter_2_workers_s"], 1e-9)   # bytes/s into workers
+    transfer = overhead["batch_result_bytes"] / rate
     out = {}
     for workers in (2, 10, 100):
         compute = lights * per_sun_one_worker / workers + batches / workers * overhead["batch_overhead_s"]
-        intake = batches * overhead["batch_result_bytes"] / rate
+        reduce = (batches - 1) / workers * transfer + np.log2(batches) * transfer + transfer
         scatter = workers * overhead["scattered_bytes"] / rate
-        out[str(workers)] = dict(compute_s=compute, client_intake_s=intake, scatter_s=scatter,
-                                 total_s=compute + intake + scatter)
+        out[str(workers)] = dict(compute_s=compute, reduce_s=float(reduce), scatter_s=scatter,
+                                 total_s=float(compute + reduce + scatter))
     return out
 
 
@@ -201,11 +207,11 @@ def markdown(doc: dict) -> str:
               f"- scattered once (mesh, sensors, normals): {c['scattered_bytes'] / 1e6:.1f} MB to each worker, "
               f"{c['scatter_2_workers_s']:.2f} s to 2 workers",
               f"- per batch of {doc['batch']} suns: {c['batch_lights_bytes']} B of lights out, "
-              f"{c['batch_result_bytes'] / 1e6:.1f} MB of counts back", "",
+              f"{c['batch_result_bytes'] / 1e6:.1f} MB of counts (summed on the workers; one array to the client)", "",
               "Predicted year (single-thread workers, one core each; model in docs/distributed.md):", "",
-              "| workers | compute | client intake | scatter | total |", "|---|---|---|---|---|"]
+              "| workers | compute | reduce (tree of sums) | scatter | total |", "|---|---|---|---|---|"]
     for workers, p in doc["prediction"].items():
-        lines.append(f"| {workers} | {p['compute_s']:.0f} s | {p['client_intake_s']:.0f} s | {p['scatter_s']:.0f} s | "
+        lines.append(f"| {workers} | {p['compute_s']:.0f} s | {p['reduce_s']:.1f} s | {p['scatter_s']:.0f} s | "
                      f"{p['total_s']:.0f} s ({p['total_s'] / 60:.1f} min) |")
     return "\n".join(lines) + "\n"
 

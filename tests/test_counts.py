@@ -81,16 +81,37 @@ def test_counts_of_the_voxel_method_on_a_subdivision_surface(rng):
     assert 0 < counts.mean() < 3
 
 
-def test_weights_sum_in_light_order(rng):
+def test_weights_sum_in_light_order_then_batches_in_pairs(rng):
+    """Weighted: each batch sums its lights in order, the batches are summed in a fixed tree (3 batches:
+    (b0 + b1) + b2), the order a cluster's run repeats; the sums are float, so the order shows."""
     mesh = csg_scene()
     points, normals = receivers(rng, 500)
     lights = directional_lights(rng, 7)
     weights = rng.uniform(0.1, 2.0, 7)
     masks = [sc.shadow_mask(mesh, light, points, normals) for light in lights]
-    expected = np.zeros(500)
-    for mask, weight in zip(masks, weights):     # batch=7: one batch, summed light by light
-        expected[mask] += weight
-    np.testing.assert_array_equal(sc.shadow_counts(mesh, lights, points, normals, weights=weights, batch=7), expected)
+    batches = []
+    for lo in (0, 3, 6):
+        part = np.zeros(500)
+        for mask, weight in zip(masks[lo:lo + 3], weights[lo:lo + 3]):
+            part[mask] += weight
+        batches.append(part)
+    expected = (batches[0] + batches[1]) + batches[2]
+    np.testing.assert_array_equal(sc.shadow_counts(mesh, lights, points, normals, weights=weights, batch=3), expected)
+
+
+@pytest.mark.parametrize("parts", [1, 2, 3, 5, 6, 7, 8, 13])
+def test_pairwise_sum_is_the_level_by_level_tree(parts):
+    """PairwiseSum fed one part at a time builds the tree that pairs parts level by level (an odd one
+    carried up): written out as brackets."""
+    from shadowcl.counts import PairwiseSum
+
+    level = [str(i) for i in range(parts)]
+    while len(level) > 1:
+        level = [f"({a}+{b})" for a, b in zip(level[::2], level[1::2])] + level[len(level) // 2 * 2:]
+    tree = PairwiseSum(lambda a, b: f"({a}+{b})")
+    for i in range(parts):
+        tree.add(str(i))
+    assert tree.total() == level[0]
 
 
 def test_no_points():

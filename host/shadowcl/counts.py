@@ -9,11 +9,14 @@ The one per-light loop of the package is :class:`LightLoop`: what does not depen
 once (the receivers checked once; the method and its device-side mesh prepared once through
 :func:`shadowcl.prepare`), then each light is one :meth:`Shadows.relight` and one query. Lights go in
 batches of ``batch`` (:data:`BATCH`); a batch's counts are summed in light order and the batches' sums
-in batch order, so the local run and a Dask run (:mod:`shadowcl.distributed`, ``client=``) add the same
-numbers in the same order and agree bit for bit, whatever worker ran a batch.
+in a fixed binary tree (:class:`PairwiseSum`), so the local run and a Dask run (:mod:`shadowcl.distributed`,
+``client=``, where the tree's sums are tasks on the workers) add the same numbers in the same order and
+agree bit for bit, whatever worker ran a batch.
 """
 
 from __future__ import annotations
+
+import operator
 
 import numpy as np
 
@@ -25,6 +28,32 @@ from .points import Points, check_points
 from .shadows import Shadows
 
 BATCH = 16   # lights per batch: a Dask task's unit of work and of loss when a worker dies
+
+
+class PairwiseSum:
+    """Parts added in a fixed binary tree, fed one at a time: parts 0+1, 2+3, ..., then those sums in
+    pairs, an odd one carried up; at most log2(parts) partial sums are held. ``add`` makes the sum of
+    two items: ``operator.add`` on arrays here, a task on a cluster (``distributed.py``), the same tree."""
+
+    def __init__(self, add=operator.add):
+        self._add = add
+        self._stack: list[tuple[int, object]] = []     # (parts summed, their sum), sizes decreasing
+
+    def add(self, part) -> None:
+        size = 1
+        while self._stack and self._stack[-1][0] == size:
+            _, left = self._stack.pop()
+            part, size = self._add(left, part), 2 * size
+        self._stack.append((size, part))
+
+    def total(self):
+        """The sum of every part so far (the pending partial sums joined from the right)."""
+        if not self._stack:
+            raise ValueError("PairwiseSum: no parts")
+        total = self._stack[-1][1]
+        for _, left in reversed(self._stack[:-1]):
+            total = self._add(left, total)
+        return total
 
 
 class LightLoop:
@@ -126,19 +155,16 @@ class LightJob:
             from .distributed import run_on_cluster
             return run_on_cluster(self, kind, client, progress)
         loop = LightLoop(self.scene_or_mesh, self.receivers, self.method, self.eps, self.device, **self.params)
+        tree = PairwiseSum()
         with _bar(progress, len(self.lights)) as bar:
             for span in self.batches():
-                self.add(result, kind, span, run_batch(loop, kind, self.lights[span], self.weights[span]))
+                part = run_batch(loop, kind, self.lights[span], self.weights[span])
+                if kind == "counts":
+                    tree.add(part)
+                else:
+                    result[span] = part
                 bar.update(span.stop - span.start)
-        return result
-
-    @staticmethod
-    def add(result: np.ndarray, kind: str, span: slice, part: np.ndarray) -> None:
-        """Fold one batch's ``part`` into ``result`` (batches must come in order for ``counts``)."""
-        if kind == "counts":
-            result += part
-        else:
-            result[span] = part
+        return tree.total() if kind == "counts" else result
 
 
 def run_batch(loop: LightLoop, kind: str, lights, weights) -> np.ndarray:

@@ -3,9 +3,11 @@
 The scene (its mesh, or the scene itself for methods that take one) and the receivers are scattered to
 every worker once (``broadcast=True``); each task is one batch of lights (:data:`shadowcl.counts.BATCH`)
 run by the worker's own :class:`~shadowcl.counts.LightLoop`, kept between tasks of the same run, on the
-worker's own OpenCL device. The client folds the batches' results as they finish, in batch order, so
-the sum is the local run's bit for bit. A worker lost mid-run costs its batches only: the scheduler
-reruns them elsewhere, from the copies of the scattered data the other workers hold.
+worker's own OpenCL device. The batches' counts are summed on the workers by tasks in the local run's
+binary tree (:class:`~shadowcl.counts.PairwiseSum`), so the sum is the local run's bit for bit and the
+client receives one array; packed masks come back batch by batch. A worker lost mid-run costs its
+batches only (and the sums it held): the scheduler reruns them elsewhere, from the copies of the
+scattered data the other workers hold.
 
 PoCL's CPU device starts one thread per core in every process; ``workers x threads`` must not exceed
 the cores, so each worker's PoCL is limited to ``threads`` threads (:func:`pocl_environment`, set
@@ -20,7 +22,7 @@ import uuid
 
 import numpy as np
 
-from .counts import LightLoop, run_batch
+from .counts import LightLoop, PairwiseSum, run_batch
 from .methods import as_mesh, method_class
 from .points import check_points
 
@@ -77,15 +79,20 @@ def run_on_cluster(job, kind: str, client, progress: bool) -> np.ndarray:
     futures = {client.submit(_batch_task, run, data, job.method, job.eps, job.params, kind,
                              job.lights[span], job.weights[span], key=f"shadowcl-{kind}-{run}-{index}"): index
                for index, span in enumerate(spans)}
-    result, pending, folded = job.empty(kind), {}, 0
+    result = job.empty(kind)
+    if kind == "counts":                             # summed on the workers, in the local run's tree
+        tree = PairwiseSum(lambda left, right: client.submit(np.add, left, right, pure=False))
+        for future in futures:
+            tree.add(future)
+        total = tree.total()
     with tqdm(total=len(job.lights), desc="lights", unit="light", disable=not progress, leave=False) as bar:
-        for future, part in as_completed(futures, with_results=True):
-            index = futures[future]
-            pending[index] = part
-            bar.update(spans[index].stop - spans[index].start)
-            while folded in pending:          # fold in batch order: the same sums as the local run
-                job.add(result, kind, spans[folded], pending.pop(folded))
-                folded += 1
+        for future in as_completed(futures):
+            span = spans[futures[future]]
+            if kind != "counts":
+                result[span] = future.result()
+            bar.update(span.stop - span.start)
+    if kind == "counts":
+        result = total.result()
     client.cancel([data])
     return result
 
