@@ -91,13 +91,12 @@ def run_on_cluster(job, kind: str, client, progress: bool) -> np.ndarray:
             if kind != "counts":
                 result[span] = future.result()
             bar.update(span.stop - span.start)
-    if kind == "counts":
-        result = total.result()
-    client.cancel([data])
-    return result
+    # the scattered data and the tasks' results are released with their futures when this returns
+    # (cancelling the data would cancel its finished dependents too: Dask's scheduler asserts on that)
+    return total.result() if kind == "counts" else result
 
 
-def _batch_task(run: str, data, method: str, eps: float, params: dict, kind: str, lights, weights) -> np.ndarray:
+def _batch_task(run: str, data, method: str, eps: float | None, params: dict, kind: str, lights, weights) -> np.ndarray:
     """On a worker: one batch of lights, on the worker's loop for ``run`` (made on its first batch)."""
     loop = _loops.get(run)
     if loop is None:
