@@ -24,7 +24,7 @@ NORTH = (0.0, 0.0, -1.0)
 def sun_times(start, end, step="1h", timezone: str = "UTC"):
     """A pandas ``DatetimeIndex`` from ``start`` (included) to ``end`` (excluded) every ``step``
     (a pandas offset such as ``"1h"``, ``"15min"``), in ``timezone`` when the times carry none."""
-    import pandas as pd
+    pd, _ = _sun_extra()
 
     try:
         step = pd.Timedelta(step)
@@ -44,8 +44,7 @@ def sun_times(start, end, step="1h", timezone: str = "UTC"):
 def sun_positions(latitude: float, longitude: float, times, altitude: float = 0.0):
     """pvlib's solar position (NREL SPA) at ``times`` (a ``DatetimeIndex``; naive times are UTC):
     a DataFrame with ``apparent_elevation``, ``elevation``, ``azimuth`` in degrees."""
-    import pandas as pd
-    from pvlib import solarposition
+    pd, solarposition = _sun_extra()
 
     latitude, longitude = _site(latitude, longitude)
     if not isinstance(times, pd.DatetimeIndex):
@@ -95,6 +94,16 @@ def light_directions(elevation, azimuth, up=UP, north=NORTH) -> np.ndarray:
     e, a = np.radians(np.asarray(elevation, float))[:, None], np.radians(np.asarray(azimuth, float))[:, None]
     to_sun = np.cos(e) * (np.cos(a) * north + np.sin(a) * east) + np.sin(e) * up
     return -to_sun
+
+
+def _sun_extra():
+    """pandas and pvlib's solarposition, or an ImportError that says which extra brings them."""
+    try:
+        import pandas
+        from pvlib import solarposition
+    except ImportError as error:
+        raise ImportError(f"sun positions need pvlib and pandas: pip install 'shadowcl[sun]' ({error})") from None
+    return pandas, solarposition
 
 
 def _site(latitude, longitude) -> tuple[float, float]:

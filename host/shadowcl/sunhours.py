@@ -37,13 +37,16 @@ def sun_hours(scene, latitude, longitude, start, end, step="1h", timezone="UTC",
               method="exact", client=None, progress=False, **params) -> SunHours:
     """Hours of direct sun on ``scene``'s sensor grids (its ``[[sensors]]``; ``spacing`` overrides
     theirs) from ``start`` to ``end`` every ``step`` at the site (:func:`shadowcl.sun.sun_lights`)."""
-    import pandas as pd
-
     grids = scene_sensors(scene, spacing)
     points = np.concatenate([g.points for g in grids])
     normals = np.concatenate([g.normals for g in grids])
     names = np.concatenate([np.full(len(g.points), g.name) for g in grids])
+    if len(points) == 0:
+        raise ValueError(f"scene {scene.name!r}: its [[sensors]] grids hold no point (no upward-facing faces "
+                         f"under the lattice)")
     elevation, azimuth = sun_angles(latitude, longitude, None, start, end, step, timezone)
+    import pandas as pd   # after sun_angles, whose ImportError names the extra
+
     step_hours = pd.Timedelta(step) / pd.Timedelta("1h")
     if len(elevation) == 0:
         return SunHours(points, names, np.zeros(len(points)), 0, step_hours)
