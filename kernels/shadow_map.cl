@@ -12,12 +12,14 @@
  *   RES          texels per side of every map
  *   FILTER       0 nearest texel, 1 bilinear depth (Williams), 2 percentage-closer k x k
  *   PCF_K        k of the percentage-closer filter (odd)
- *   BIAS         0 constant, 1 slope-scaled, 2 normal offset (see bias_of)
+ *   BIAS         0 constant, 1 slope-scaled, 2 normal offset, 3 plane (the stored triangles' planes and
+ *                exact tests at the receiver's ray instead of stored depths; needs the triangle maps)
  *   NORMALS      1: normals are given (facing test, slope and offset use them)
  *   DITHER       1: Williams' +-0.5 texel noise on the transformed coordinates
  */
 
 #include "vecmath.h"
+#include "ray_triangle.h"
 
 #define VIEW_FLOATS 20 /* matrix (16, row-major), texel scale, near, far, unused */
 #define TAN_MAX 16.0f  /* slope bias is capped there: beyond ~86 degrees it would lift the shadow off */
@@ -82,11 +84,87 @@ INLINE float lit_fraction(global const float *map, global const float *v, const 
 #endif
 }
 
+/* Plane bias ------------------------------------------------------------------------------------- */
+
+#define PRECISION_ULPS 16.0f /* float32 rounding of a relative position and of a triangle's plane, in FLT_EPSILON */
+
+/* Triangle id stored at a texel (indices clamped to the map), -1 for none. */
+INLINE int map_triangle(global const int *ids, const int row, const int col)
+{
+    return ids[clamp(row, 0, RES - 1) * RES + clamp(col, 0, RES - 1)];
+}
+
+/* Whether stored triangle f shadows the start s of the ray s + lambda l (l unit, towards the light):
+ * its exact (watertight) test hits for tmin < lambda < tmax, or its plane, continued over the ray,
+ * lies more than `ahead` in front of s (lambda = n.(v0 - s) / n.l > ahead, and before the light): the
+ * surface the texel stands for, in case the ray passes its stored triangle but meets the same surface
+ * beyond it. Plane distances are differences of positions near the maps' origin: precise for a light
+ * at any distance. */
+INLINE int triangle_shadows(global const float *vertices, global const int *faces, const int f, const WtRay *ray,
+                            const float tmin, const float tmax, const float ahead)
+{
+    if (f < 0)
+        return 0;
+    float ax, ay, az, bx, by, bz, cx, cy, cz;
+    LOAD3(vertices, faces[3 * f], ax, ay, az);
+    LOAD3(vertices, faces[3 * f + 1], bx, by, bz);
+    LOAD3(vertices, faces[3 * f + 2], cx, cy, cz);
+    if (wt_hit(ray, ax, ay, az, bx, by, bz, cx, cy, cz, tmin, tmax))
+        return 1;
+    const float ux = bx - ax, uy = by - ay, uz = bz - az, vx = cx - ax, vy = cy - ay, vz = cz - az;
+    const float nx = uy * vz - uz * vy, ny = uz * vx - ux * vz, nz = ux * vy - uy * vx;
+    const float facing = dot3(nx, ny, nz, ray->dx, ray->dy, ray->dz);
+    const float lambda = dot3(nx, ny, nz, ax - ray->ox, ay - ray->oy, az - ray->oz) / facing;
+    return facing != 0.0f && lambda > ahead && lambda < tmax;   /* a plane along the ray: no verdict */
+}
+
+/* Visibility of the ray's start s projected at texel coordinates (s, t) from the stored triangles:
+ * nearest: in shadow when the exact test hits any triangle of the 3 x 3 texels around (the texel's
+ * own triangle may not be the one above s near a silhouette) or the texel's own triangle's plane is
+ * ahead; bilinear: lit when the texels whose triangle does not shadow s carry at least half of the
+ * bilinear weight of the four around (a binary answer, as Williams' interpolated depth gives); pcf:
+ * the fraction of the k x k texels whose triangle does not shadow s. */
+INLINE float plane_lit_fraction(global const int *ids, global const float *vertices, global const int *faces,
+                                const WtRay *ray, const float s, const float t, const float tmin, const float tmax,
+                                const float ahead)
+{
+#if FILTER == 1
+    const float s0 = SC_FLOOR(s), t0 = SC_FLOOR(t), fs = s - s0, ft = t - t0;
+    const int c = (int)s0, r = (int)t0;
+    float lit = 0.0f;
+    for (int dr = 0; dr <= 1; ++dr)
+        for (int dc = 0; dc <= 1; ++dc) {
+            const float weight = (dc ? fs : 1.0f - fs) * (dr ? ft : 1.0f - ft);
+            if (!triangle_shadows(vertices, faces, map_triangle(ids, r + dr, c + dc), ray, tmin, tmax, ahead))
+                lit += weight;
+        }
+    return lit >= 0.5f ? 1.0f : 0.0f;
+#else
+    const int c = (int)SC_FLOOR(s + 0.5f), r = (int)SC_FLOOR(t + 0.5f);
+#if FILTER == 0
+    for (int dr = -1; dr <= 1; ++dr)
+        for (int dc = -1; dc <= 1; ++dc)
+            if (triangle_shadows(vertices, faces, map_triangle(ids, r + dr, c + dc), ray, tmin, tmax, SC_BIG))
+                return 0.0f;
+    return triangle_shadows(vertices, faces, map_triangle(ids, r, c), ray, tmin, tmax, ahead) ? 0.0f : 1.0f;
+#else
+    int lit = 0;
+    for (int dr = -(PCF_K / 2); dr <= PCF_K / 2; ++dr)
+        for (int dc = -(PCF_K / 2); dc <= PCF_K / 2; ++dc)
+            lit += !triangle_shadows(vertices, faces, map_triangle(ids, r + dr, c + dc), ray, tmin, tmax, ahead);
+    return (float)lit / (float)(PCF_K * PCF_K);
+#endif
+#endif
+}
+
 /* shadow_visibility: one work-item per receiver, n receivers.
  * In:  points (3 floats each, relative to the maps' origin), normals (3 floats each, unit; read only
  *      when NORMALS), to_light: the eye (PERSPECTIVE) or the unit direction towards the light;
  *      views (VIEW_FLOATS per view), map0..map5 (RES x RES depths, row-major: view k's map is mapk;
  *      a single view reads map0 only),
+ *      ids0..ids5 (RES x RES triangle ids, -1 empty; read only when BIAS == 3), vertices (3 floats
+ *      each, relative to the maps' origin) and faces (3 ints each) of the mesh drawn, extent: the
+ *      largest |coordinate| of those vertices (sets the rounding allowance),
  *      bias = (constant, slope / offset coefficient) in texels, eps: DESIGN.md's offset (the start
  *      moves eps along the normal, and surfaces within eps of it along the ray do not shadow it),
  *      seed of the dither.
@@ -97,7 +175,10 @@ INLINE float lit_fraction(global const float *map, global const float *v, const 
 kernel void shadow_visibility(global const float *points, global const float *normals, const float4 to_light,
                               global const float *views, global const float *map0, global const float *map1,
                               global const float *map2, global const float *map3, global const float *map4,
-                              global const float *map5, const float2 bias, const float eps,
+                              global const float *map5, global const int *ids0, global const int *ids1,
+                              global const int *ids2, global const int *ids3, global const int *ids4,
+                              global const int *ids5, global const float *vertices, global const int *faces,
+                              const float extent, const float2 bias, const float eps,
                               const uint seed, const int n, global float *visibility)
 {
     const int gid = get_global_id(0);
@@ -123,9 +204,12 @@ kernel void shadow_visibility(global const float *points, global const float *no
     global const float *v = views + VIEW_FLOATS * face;
     global const float *map = face < 3 ? (face == 0 ? map0 : (face == 1 ? map1 : map2))
                                        : (face == 3 ? map3 : (face == 4 ? map4 : map5));
+    global const int *ids = face < 3 ? (face == 0 ? ids0 : (face == 1 ? ids1 : ids2))
+                                     : (face == 3 ? ids3 : (face == 4 ? ids4 : ids5));
 #else
     global const float *v = views;
     global const float *map = map0;
+    global const int *ids = ids0;
 #endif
 
     /* Texel footprint T at the receiver: a texel's widest extent across the light's ray, the bias's
@@ -174,5 +258,20 @@ kernel void shadow_visibility(global const float *points, global const float *no
 #endif
 
     /* Compare */
+#if BIAS == 3
+    /* The ray from the start towards the light; surfaces within eps (DESIGN.md) and float32 rounding
+     * of the start do not shadow it, nor planes within the bias (the surface's curvature over the
+     * texel the filter reads). */
+    const WtRay ray = wt_setup(px, py, pz, lx, ly, lz);
+    const float rounding = PRECISION_ULPS * FLT_EPSILON * (extent + SC_MAX(SC_MAX(SC_ABS(px), SC_ABS(py)), SC_ABS(pz)));
+#if PERSPECTIVE
+    const float tmax = dist;
+#else
+    const float tmax = SC_BIG;
+#endif
+    visibility[gid] = plane_lit_fraction(ids, vertices, faces, &ray, s, t, eps + rounding, tmax,
+                                         offset + eps + rounding);
+#else
     visibility[gid] = lit_fraction(map, v, s, t, distance_of(cz / cw, v) - offset - eps_axial);
+#endif
 }

@@ -57,11 +57,22 @@ def host_maps(method) -> np.ndarray:
     return np.stack([np.zeros((maps.resolution,) * 2, np.float32) if d is None else d.read() for d in maps.depth])
 
 
+def host_triangles(method):
+    """(ids, vertices, faces, extent) of a "plane" method for the reference: the (V, R, R) triangle-id maps
+    read back (-1 for a face not drawn), the mesh's vertices relative to the maps' origin as float32."""
+    maps = method.maps
+    ids = np.stack([np.full((maps.resolution,) * 2, -1, np.int32) if d is None
+                    else method.device.from_device(d.triangle, d.shape, np.int32) for d in maps.depth])
+    vertices = (method._mesh.vertices.astype(np.float64) - maps.origin).astype(np.float32)
+    return ids, vertices, method._mesh.faces, np.abs(vertices.astype(np.float64)).max()
+
+
 def reference_visibility(method, points, normals, **perturbation):
     maps = method.maps
+    triangles = host_triangles(method) if method.bias == "plane" else None
     return ref.visibility(points - maps.origin, normals, maps.kind, maps.to_light, maps.views, host_maps(method),
                           method.bias_texels().astype(np.float64), method.bias, method.filter, method.pcf_size,
-                          method.dither, method.seed, eps=method.eps, **perturbation)
+                          method.dither, method.seed, eps=method.eps, triangles=triangles, **perturbation)
 
 
 def ties(method, points, normals):
@@ -201,7 +212,8 @@ def test_texel_footprint_is_a_texels_widest_extent_across_the_ray(device, rng, l
 
 # Shadow test against the reference ------------------------------------------------------------------
 
-SETTINGS = [dict(filter=f, bias=b) for f in ("nearest", "bilinear", "pcf") for b in ("constant", "slope", "normal")]
+SETTINGS = [dict(filter=f, bias=b) for f in ("nearest", "bilinear", "pcf")
+            for b in ("constant", "slope", "normal", "plane")]
 SETTINGS += [dict(filter="nearest", dither=1, seed=7), dict(filter="pcf", pcf_size=5, dither=1)]
 
 

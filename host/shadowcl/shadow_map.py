@@ -76,13 +76,14 @@ from .methods import Method
 from .points import BOUNDS_SLACK, check_points
 from .views import View
 
-BIASES = ("constant", "slope", "normal")
+BIASES = ("constant", "slope", "normal", "plane")
 FILTERS = ("nearest", "bilinear", "pcf")
 DEFAULT_RESOLUTION = 2048
 MAX_RESOLUTION = raster.MAX_SIDE
 VIEW_FLOATS = 20            # kernels/shadow_map.cl
 CONSTANT_TEXELS = 0.5       # the constant term of every bias, in texels: rounding and curvature
 CONSTANT_TAN = 2.0          # tan(theta) the "constant" bias covers (~63 degrees)
+PLANE_CURVATURE = 1.0       # "plane": texels the surface may curve away from a stored plane per texel of reach
 NEAREST_REACH = math.sqrt(0.5)   # farthest a nearest texel's centre lies from the projection, in texels
 BILINEAR_REACH = 0.5
 FACE_MARGIN = 1e-5          # widening of the cube-face test, relative to the coordinates' size (float32: 6e-8)
@@ -118,7 +119,8 @@ class ShadowMapMethod(Method):
     bounded = True
     parameters = {
         "resolution": (None, f"texels per side of each (square) depth map; None picks {DEFAULT_RESOLUTION}"),
-        "bias": ("normal", "depth bias: 'constant', 'slope' (slope-scaled) or 'normal' (normal offset)"),
+        "bias": ("plane", "depth bias: 'plane' (the stored triangles' planes and exact tests at the receiver; "
+                          "needs no normals), 'constant', 'slope' (slope-scaled) or 'normal' (normal offset)"),
         "bias_scale": (1.0, "multiplies the default bias, which is derived from the texel footprint"),
         "filter": ("nearest", "'nearest', 'bilinear' (Williams' interpolated depth) or 'pcf' (percentage closer)"),
         "pcf_size": (3, "texels per side of the percentage-closer filter (odd)"),
@@ -173,6 +175,7 @@ class ShadowMapMethod(Method):
         self.maps = LightMaps(fitted.kind, origin, to_light, records, tuple(view for view, _ in views),
                               [None] * fitted.nviews, resolution)
         self._mesh, self._views_dev = mesh, self.device.to_device(records)
+        self._extent = float(np.abs(mesh.vertices.astype(np.float64) - origin).max(initial=0.0))
         self._receiver_bounds = receiver_bounds
         self.eps = float(eps)
         self._draw(receiver_bounds - origin)
@@ -184,7 +187,8 @@ class ShadowMapMethod(Method):
         faces = reached_faces(bounds, maps.to_light) if maps.kind == "cube" else [True]
         for k in np.flatnonzero(faces):
             if maps.depth[k] is None:
-                maps.depth[k] = raster.depth_map(self.device, self._mesh, maps.raster_views[k])
+                maps.depth[k] = raster.depth_map(self.device, self._mesh, maps.raster_views[k],
+                                                 triangles=self.bias == "plane")
         self._count_maps()
 
     # Classify -----------------------------------------------------------------------------------
@@ -205,11 +209,13 @@ class ShadowMapMethod(Method):
         if maps.kind == "cube":   # faces these points reach that prepare's bounds did not
             self._draw(receivers.bounds - maps.origin)
         normals_np = np.zeros(1, np.float32) if normals is None else np.ascontiguousarray(normals, dtype=np.float32)
+        vertices_dev, faces_dev = raster.mesh_buffers(device, self._mesh, maps.origin)   # what the maps drew
         kernel = device.kernel("shadow_map.cl", "shadow_visibility", self._options(normals is not None))
         kernel(device.queue, (-(-n // _GROUP) * _GROUP,), (_GROUP,),
                device.to_device(relative), device.to_device(normals_np),
                np.array([*maps.to_light, 0.0], dtype=np.float32), self._views_dev,
-               *self._map_buffers(), self.bias_texels(), np.float32(self.eps), np.uint32(self.seed), np.int32(n),
+               *self._map_buffers(), *self._map_buffers("triangle"), vertices_dev, faces_dev,
+               np.float32(self._extent), self.bias_texels(), np.float32(self.eps), np.uint32(self.seed), np.int32(n),
                visibility_dev)
         return device.from_device(visibility_dev, n, np.float32)
 
@@ -223,11 +229,13 @@ class ShadowMapMethod(Method):
             raise ValueError("points: outside the receiver_bounds this shadow map was prepared for; "
                              "prepare again with bounds that cover them")
 
-    def _map_buffers(self) -> list:
-        """The kernel's six map arguments: face k's map, a single view's map repeated; a face not drawn
-        (no point of the call uses it) passes another face's buffer."""
+    def _map_buffers(self, kind: str = "buffer") -> list:
+        """The kernel's six map arguments: face k's depth map (``kind="buffer"``) or triangle ids
+        (``"triangle"``; the depths stand in when the bias reads no ids), a single view's repeated; a face
+        not drawn (no point of the call uses it) passes another face's buffer."""
         drawn = [depth for depth in self.maps.depth if depth is not None]
-        return [(self.maps.depth[k % len(self.maps.depth)] or drawn[0]).buffer for k in range(6)]
+        maps = [self.maps.depth[k % len(self.maps.depth)] or drawn[0] for k in range(6)]
+        return [getattr(m, kind) if getattr(m, kind) is not None else m.buffer for m in maps]
 
     def classify(self, points, normals=None) -> np.ndarray:
         """bool (N,): True = in shadow, where the visibility is below 0.5."""
@@ -235,8 +243,10 @@ class ShadowMapMethod(Method):
 
     def bias_texels(self) -> np.ndarray:
         """(constant, slope or lift) coefficients of the bias in texel footprints (see the module docstring)."""
-        constant = CONSTANT_TEXELS + (CONSTANT_TAN * self.reach() if self.bias == "constant" else 0.0)
-        return np.array([constant, self.reach()], dtype=np.float32) * np.float32(self.bias_scale)
+        extra = {"constant": CONSTANT_TAN * self.reach(), "plane": PLANE_CURVATURE * self.reach()}
+        constant = CONSTANT_TEXELS + extra.get(self.bias, 0.0)
+        slope = 0.0 if self.bias == "plane" else self.reach()   # "plane" lifts nothing: it shifted shadow edges
+        return np.array([constant, slope], dtype=np.float32) * np.float32(self.bias_scale)
 
     def reach(self) -> float:
         """How far, in texels, the filter's samples lie from a receiver's exact projection (sets the bias)."""
