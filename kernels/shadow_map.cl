@@ -6,7 +6,8 @@
  * samples screen ((col + 0.5), (row + 0.5)) with row 0 at the top.
  *
  * The host (host/shadowcl/shadow_map.py) specialises the kernel with -D:
- *   PERSPECTIVE  1: views are perspective (depth = near / distance, the ray from the light's eye);
+ *   PERSPECTIVE  1: views are perspective (depth = near (far - w) / (w (far - near)) of the distance w
+ *                along the view axis, near / w for a cube's infinite far; the ray from the light's eye);
  *                0: one orthographic view (depth = (far - distance) / (far - near), along the light)
  *   CUBE         1: six square faces +x -x +y -y +z -z, a point uses the face of its dominant axis
  *   RES          texels per side of every map
@@ -21,7 +22,7 @@
 #include "vecmath.h"
 #include "ray_triangle.h"
 
-#define VIEW_FLOATS 20 /* matrix (16, row-major), texel scale, near, far, unused */
+#define VIEW_FLOATS 20 /* matrix (16, row-major), texel scale, near, far, near / far (perspective; 0: far infinite) */
 #define TAN_MAX 16.0f  /* slope bias is capped there: beyond ~86 degrees it would lift the shadow off */
 
 /* Lowbias32 (C. Wellons): a well-mixed 32-bit hash; reference/shadow_map.py repeats it bit for bit. */
@@ -46,7 +47,7 @@ INLINE float centred_noise(const uint h)
 INLINE float distance_of(const float depth, global const float *v)
 {
 #if PERSPECTIVE
-    return depth > 0.0f ? v[17] / depth : SC_BIG;
+    return depth > 0.0f ? v[17] / (depth * (1.0f - v[19]) + v[19]) : SC_BIG;
 #else
     return v[18] - depth * (v[18] - v[17]);
 #endif

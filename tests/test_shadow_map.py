@@ -248,7 +248,7 @@ def exact_mask(device, mesh, light, points, normals):
 # Lowest light elevation (degrees above the plane) each setting keeps a lit plane clean at, at its
 # default bias: the normal offset has no limit; the slope bias is capped at tan = 16 and a nearest
 # texel sits up to 0.71 texel away; the constant bias covers tan <= 2 (elevation >= 27 degrees).
-GRAZING_LIMITS = {("normal", f): 0.0 for f in ("nearest", "bilinear", "pcf")}
+GRAZING_LIMITS = {(b, f): 0.0 for b in ("normal", "plane") for f in ("nearest", "bilinear", "pcf")}
 GRAZING_LIMITS.update({("slope", "nearest"): 5.0, ("slope", "bilinear"): 1.0, ("slope", "pcf"): 1.0,
                        ("constant", "nearest"): 27.0, ("constant", "bilinear"): 1.0, ("constant", "pcf"): 27.0})
 
@@ -261,15 +261,17 @@ GRAZING_CASES = [(bias, filter, elevation) for (bias, filter), limit in GRAZING_
 @pytest.mark.parametrize("bias, filter, elevation_degrees", GRAZING_CASES, ids=lambda v: str(v))
 def test_grazing_light_on_a_lit_plane_casts_no_self_shadow(device, rng, elevation_degrees, bias, filter):
     """Williams' Figure 1: a lit plane under a grazing light must not shadow itself at the default bias
-    (the default setting is normal offset + nearest), down to the limit of each setting."""
+    (the default setting is plane + nearest), down to the limit of each setting; the plane bias also
+    without normals (the others fall back to their constant term without them)."""
     plane = grid_plane(20, 1.0)
     points = np.column_stack([rng.uniform(-0.95, 0.95, 5000), np.zeros(5000), rng.uniform(-0.95, 0.95, 5000)])
     normals = np.tile([0.0, 1.0, 0.0], (len(points), 1))
     e = np.radians(elevation_degrees)
     for light in (sc.DirectionalLight((np.cos(e), -np.sin(e), 0.1)), sc.PointLight((-3.0, 3.0 * np.tan(e), 0.2))):
         method = prepared(device, plane, light, points, resolution=512, bias=bias, filter=filter)
-        mask = method.classify(points, normals)
-        assert not mask.any(), f"{light}: {int(mask.sum())} self-shadowed points"
+        for given in (normals, None) if bias == "plane" else (normals,):
+            mask = method.classify(points, given)
+            assert not mask.any(), f"{light}, normals {given is not None}: {int(mask.sum())} self-shadowed points"
 
 
 SCENES = {
@@ -360,9 +362,9 @@ def test_shadow_mask_api_and_methods_listing(device, rng):
     listed = sc.methods()["shadow_map"]
     assert set(listed) == set(ShadowMapMethod.parameters) | {"eps"}
     assert listed["eps"][1].startswith("honoured")
-    assert (listed["bias"][0], listed["filter"][0], listed["resolution"][0]) == ("normal", "nearest", None)
+    assert (listed["bias"][0], listed["filter"][0], listed["resolution"][0]) == ("plane", "nearest", None)
     method = ShadowMapMethod(device)
-    assert (method.bias, method.filter, method.resolution) == ("normal", "nearest", None)
+    assert (method.bias, method.filter, method.resolution) == ("plane", "nearest", None)
 
 
 # Bad input ----------------------------------------------------------------------------------------

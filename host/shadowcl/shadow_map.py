@@ -335,14 +335,25 @@ def _view(fitted: lightspace.LightViews, k: int, origin: np.ndarray, corners: np
     matrix = np.zeros((4, 4))
     if fitted.perspective:
         eye = fitted.eye
-        if near is None:   # the box is in front of a single view: its nearest corner bounds every occluder
-            near = max(0.99 * float(((corners - eye) @ forward).min()), 1e-6 * scale)
-        far = math.inf
         matrix[0, :3] = (2 * right - (u0 + u1) * forward) / size
         matrix[1, :3] = (2 * up - (v0 + v1) * forward) / size
         matrix[3, :3] = forward
         matrix[:, 3] = -matrix[:, :3] @ eye
-        matrix[2, 3] = near                              # depth = near / distance
+        if near is None:   # the box is in front of a single view: its corners bound every occluder
+            # depth = near (far - w) / (w (far - near)), w the distance along the axis: 1 at near, 0 at
+            # far, with far - w = (far + forward.eye) - forward.p a difference of scene-sized numbers, so
+            # a light 1e6 scene sizes away still ranks the scene's surfaces (near / w alone would put
+            # them all within 1e-6 of 1, a few float32 steps).
+            t = corners @ forward
+            margin = 1e-3 * max(float(t.max() - t.min()), 1e-6 * scale)
+            near = max(0.99 * float((t - forward @ eye).min()), 1e-6 * scale)
+            far_ahead = float(t.max()) + margin                # far + forward.eye: scene-sized
+            far = far_ahead - float(forward @ eye)
+            k = near / (far - near)
+            matrix[2, :3], matrix[2, 3] = -k * forward, k * far_ahead
+        else:
+            far = math.inf
+            matrix[2, 3] = near                          # depth = near / distance
     else:
         t = corners @ forward
         margin = 1e-3 * max(float(t.max() - t.min()), 1e-6 * scale)
@@ -353,5 +364,5 @@ def _view(fitted: lightspace.LightViews, k: int, origin: np.ndarray, corners: np
         matrix[3, 3] = 1.0
     record = np.zeros(VIEW_FLOATS, dtype=np.float32)
     record[:16] = matrix.ravel()
-    record[16:19] = size / resolution, near, min(far, np.finfo(np.float32).max)
+    record[16:20] = size / resolution, near, min(far, np.finfo(np.float32).max), near / far if fitted.perspective else 0
     return View(origin.copy(), matrix, resolution, resolution), record

@@ -66,10 +66,10 @@ def dither_offsets(n: int, seed: int) -> np.ndarray:
 
 
 def distance_of(depth: np.ndarray, record: np.ndarray, perspective: bool) -> np.ndarray:
-    near, far = float(record[17]), float(record[18])
-    if perspective:
+    near, far, ratio = float(record[17]), float(record[18]), float(record[19])
+    if perspective:   # depth = near (far - w) / (w (far - near)), ratio = near / far (0: far infinite)
         with np.errstate(divide="ignore"):
-            return np.where(depth > 0, near / np.where(depth > 0, depth, 1.0), np.inf)
+            return np.where(depth > 0, near / np.where(depth > 0, depth * (1 - ratio) + ratio, 1.0), np.inf)
     return far - depth * (far - near)
 
 
