@@ -17,6 +17,7 @@ import pytest
 import shadowcl as sc
 from shadowcl import lightspace
 from shadowcl.exact import ExactMethod
+from shadowcl.geometry import bounds_diagonal
 from shadowcl.methods import default_eps
 from shadowcl.shadows import shadow_mask
 from shadowcl.metrics import mask_error
@@ -467,3 +468,50 @@ def test_eps_is_honoured(device, light):
             assert np.all(mask == shadowed) and np.all(exact == shadowed), (e, given is None, mask.mean(), exact.mean())
             np.testing.assert_allclose(method.visibility(points, given), reference_visibility(method, points, given),
                                        atol=0)
+
+
+# Without normals: cube maps, far lights ------------------------------------------------------------
+
+
+def test_cube_map_without_normals_matches_exact_but_for_edges(device, rng):
+    """A light inside the scene (six faces), no normals: the plane bias leaves no acne on the floor,
+    the box or the plate (receivers on every surface); the errors left are the map's shadow edges."""
+    mesh, light = floor_under_a_close_light()
+    triangles = mesh.triangles.astype(np.float64)
+    area = np.linalg.norm(np.cross(triangles[:, 1] - triangles[:, 0], triangles[:, 2] - triangles[:, 0]), axis=1)
+    pick = rng.choice(len(area), 40000, p=area / area.sum())
+    u, v = rng.uniform(size=(2, len(pick)))
+    u, v = np.where(u + v > 1, 1 - u, u), np.where(u + v > 1, 1 - v, v)
+    points = triangles[pick, 0] + u[:, None] * (triangles[pick, 1] - triangles[pick, 0]) + v[:, None] * (
+        triangles[pick, 2] - triangles[pick, 0])
+    truth = sc.shadow_mask(mesh, light, points, device=device)
+    errors = {}
+    for bias in ("plane", "normal"):
+        method = prepared(device, mesh, light, points, resolution=512, bias=bias)
+        assert method.maps.kind == "cube"
+        errors[bias] = mask_error(method.classify(points, None), truth)
+    # measured 31 of 40,000 wrong (0.08 %), all false shadow along edges, against 5,241 (13 %) for the normal
+    # offset without normals (its constant term alone)
+    assert errors["plane"].fraction <= 0.002, errors
+    assert errors["normal"].fraction > 10 * errors["plane"].fraction, errors
+
+
+@pytest.mark.parametrize("distance", [1e2, 1e6])
+def test_a_point_light_a_million_scene_sizes_away(device, rng, distance):
+    """A sun placed as a point light: the plane bias measures plane distances in the scene's frame, and
+    the map's depths run from near to a finite far plane, so the answer is the directional light's
+    (at 1e6 scene sizes the rays differ by 1e-6 radians) but for the map's edge band."""
+    mesh = sc.Mesh.concatenate([grid_plane(8, 3.0), box((-0.5, 0.0, -0.5), (0.5, 1.0, 0.5))])
+    xz = rng.uniform(-3.0, 3.0, (20000, 2))
+    points = np.column_stack([xz[:, 0], np.zeros(len(xz)), xz[:, 1]])
+    normals = np.tile([0.0, 1.0, 0.0], (len(points), 1))
+    towards = np.array([0.5, 0.8, 0.3]) / np.linalg.norm([0.5, 0.8, 0.3])
+    light = sc.PointLight(tuple(towards * distance * bounds_diagonal(mesh.bounds)))
+    truth = sc.shadow_mask(mesh, sc.DirectionalLight(tuple(-towards)), points, normals, device=device)
+    assert 0.05 < truth.mean() < 0.5
+    for given in (normals, None):
+        method = prepared(device, mesh, light, points, resolution=1024)
+        assert method.maps.kind == "perspective"
+        error = mask_error(method.classify(points, given), truth)
+        # the edge band: about a texel (6 / 1024 of the floor) along a shadow outline of ~8 units
+        assert error.fraction <= 0.001, (distance, given is not None, error)
