@@ -95,14 +95,23 @@ INLINE int map_triangle(global const int *ids, const int row, const int col)
     return ids[clamp(row, 0, RES - 1) * RES + clamp(col, 0, RES - 1)];
 }
 
-/* Whether stored triangle f shadows the start s of the ray s + lambda l (l unit, towards the light):
- * its exact (watertight) test hits for tmin < lambda < tmax, or its plane, continued over the ray,
- * lies more than `ahead` in front of s (lambda = n.(v0 - s) / n.l > ahead, and before the light): the
- * surface the texel stands for, in case the ray passes its stored triangle but meets the same surface
- * beyond it. Plane distances are differences of positions near the maps' origin: precise for a light
- * at any distance. */
-INLINE int triangle_shadows(global const float *vertices, global const int *faces, const int f, const WtRay *ray,
-                            const float tmin, const float tmax, const float ahead)
+/* What stored triangle f (-1: none) says about the ray s + lambda l from a receiver's start s (l unit,
+ * towards the light), one of:
+ * HIT     its exact (watertight) test hits for tmin < lambda < tmax;
+ * BEHIND  the ray meets it at or behind s: -behind < lambda < tmin (the caller's window): the light
+ *         sees the receiver's own surface (or one behind it) near this texel;
+ * AHEAD   its plane, continued over the ray, crosses it more than `ahead` in front of s and before the
+ *         light: the surface the texel stands for, in case the ray passes the stored triangle but meets
+ *         the same surface beyond it (triangles smaller than a texel are not all in the map);
+ * 0       none of these.
+ * Plane distances are differences of positions near the maps' origin: precise for a light at any
+ * distance. */
+#define HIT 1
+#define BEHIND 2
+#define AHEAD 3
+
+INLINE int triangle_verdict(global const float *vertices, global const int *faces, const int f, const WtRay *ray,
+                            const float tmin, const float tmax, const float ahead, const float behind)
 {
     if (f < 0)
         return 0;
@@ -111,49 +120,64 @@ INLINE int triangle_shadows(global const float *vertices, global const int *face
     LOAD3(vertices, faces[3 * f + 1], bx, by, bz);
     LOAD3(vertices, faces[3 * f + 2], cx, cy, cz);
     if (wt_hit(ray, ax, ay, az, bx, by, bz, cx, cy, cz, tmin, tmax))
-        return 1;
+        return HIT;
+    if (wt_hit(ray, ax, ay, az, bx, by, bz, cx, cy, cz, -behind, tmin))
+        return BEHIND;
     const float ux = bx - ax, uy = by - ay, uz = bz - az, vx = cx - ax, vy = cy - ay, vz = cz - az;
     const float nx = uy * vz - uz * vy, ny = uz * vx - ux * vz, nz = ux * vy - uy * vx;
     const float facing = dot3(nx, ny, nz, ray->dx, ray->dy, ray->dz);
     const float lambda = dot3(nx, ny, nz, ax - ray->ox, ay - ray->oy, az - ray->oz) / facing;
-    return facing != 0.0f && lambda > ahead && lambda < tmax;   /* a plane along the ray: no verdict */
+    return facing != 0.0f && lambda > ahead && lambda < tmax ? AHEAD : 0;   /* a plane along the ray: none */
 }
 
-/* Visibility of the ray's start s projected at texel coordinates (s, t) from the stored triangles:
- * nearest: in shadow when the exact test hits any triangle of the 3 x 3 texels around (the texel's
- * own triangle may not be the one above s near a silhouette) or the texel's own triangle's plane is
- * ahead; bilinear: lit when the texels whose triangle does not shadow s carry at least half of the
- * bilinear weight of the four around (a binary answer, as Williams' interpolated depth gives); pcf:
- * the fraction of the k x k texels whose triangle does not shadow s. */
+/* Visibility of the ray's start s projected at texel coordinates (s, t) from the stored triangles of
+ * the texels the filter reads (nearest: the 3 x 3 around, as the texel's own triangle may not be the
+ * one above s near a silhouette). A texel shadows s when its triangle is HIT, or AHEAD unless some
+ * texel's triangle is BEHIND (then the light sees s's own surface there, and only an exact hit
+ * shadows it: no plane continued from a neighbouring face across an edge). Nearest: in shadow when any of the 3 x 3 is HIT or the own texel shadows;
+ * bilinear: lit when the texels not shadowing carry at least half of the bilinear weight of the four
+ * around (a binary answer, as Williams' interpolated depth gives); pcf: the fraction of the k x k
+ * texels not shadowing. */
 INLINE float plane_lit_fraction(global const int *ids, global const float *vertices, global const int *faces,
                                 const WtRay *ray, const float s, const float t, const float tmin, const float tmax,
-                                const float ahead)
+                                const float ahead, const float behind)
 {
+    float hit = 0.0f, ahead_weight = 0.0f;   /* the weight of the texels HIT and AHEAD */
+    int seen = 0;                            /* a texel's triangle is BEHIND */
 #if FILTER == 1
     const float s0 = SC_FLOOR(s), t0 = SC_FLOOR(t), fs = s - s0, ft = t - t0;
     const int c = (int)s0, r = (int)t0;
-    float lit = 0.0f;
     for (int dr = 0; dr <= 1; ++dr)
         for (int dc = 0; dc <= 1; ++dc) {
             const float weight = (dc ? fs : 1.0f - fs) * (dr ? ft : 1.0f - ft);
-            if (!triangle_shadows(vertices, faces, map_triangle(ids, r + dr, c + dc), ray, tmin, tmax, ahead))
-                lit += weight;
+            const int v = triangle_verdict(vertices, faces, map_triangle(ids, r + dr, c + dc), ray, tmin, tmax, ahead, behind);
+            hit += v == HIT ? weight : 0.0f;
+            ahead_weight += v == AHEAD ? weight : 0.0f;
+            seen |= v == BEHIND;
         }
-    return lit >= 0.5f ? 1.0f : 0.0f;
+    return 1.0f - hit - (seen ? 0.0f : ahead_weight) >= 0.5f ? 1.0f : 0.0f;
 #else
     const int c = (int)SC_FLOOR(s + 0.5f), r = (int)SC_FLOOR(t + 0.5f);
 #if FILTER == 0
-    for (int dr = -1; dr <= 1; ++dr)
-        for (int dc = -1; dc <= 1; ++dc)
-            if (triangle_shadows(vertices, faces, map_triangle(ids, r + dr, c + dc), ray, tmin, tmax, SC_BIG))
-                return 0.0f;
-    return triangle_shadows(vertices, faces, map_triangle(ids, r, c), ray, tmin, tmax, ahead) ? 0.0f : 1.0f;
+    const int reach = 1;
 #else
-    int lit = 0;
-    for (int dr = -(PCF_K / 2); dr <= PCF_K / 2; ++dr)
-        for (int dc = -(PCF_K / 2); dc <= PCF_K / 2; ++dc)
-            lit += !triangle_shadows(vertices, faces, map_triangle(ids, r + dr, c + dc), ray, tmin, tmax, ahead);
-    return (float)lit / (float)(PCF_K * PCF_K);
+    const int reach = PCF_K / 2;
+#endif
+    for (int dr = -reach; dr <= reach; ++dr)
+        for (int dc = -reach; dc <= reach; ++dc) {
+            const int v = triangle_verdict(vertices, faces, map_triangle(ids, r + dr, c + dc), ray, tmin, tmax, ahead, behind);
+            hit += v == HIT;
+#if FILTER == 0
+            ahead_weight += v == AHEAD && dr == 0 && dc == 0;   /* the own texel's plane only */
+#else
+            ahead_weight += v == AHEAD;
+#endif
+            seen |= v == BEHIND;
+        }
+#if FILTER == 0
+    return hit > 0.0f || (!seen && ahead_weight > 0.0f) ? 0.0f : 1.0f;
+#else
+    return 1.0f - (hit + (seen ? 0.0f : ahead_weight)) / (float)(PCF_K * PCF_K);
 #endif
 #endif
 }
@@ -270,8 +294,16 @@ kernel void shadow_visibility(global const float *points, global const float *no
 #else
     const float tmax = SC_BIG;
 #endif
+#if NORMALS
+    /* Facing the light (the test above), the receiver is lit by any surface the light sees at or
+     * behind it; without normals only its own surface, within the bias, says so (a back face near
+     * a silhouette would otherwise take the floor seen beyond it for light). */
+    const float behind = SC_BIG;
+#else
+    const float behind = offset + eps + rounding;
+#endif
     visibility[gid] = plane_lit_fraction(ids, vertices, faces, &ray, s, t, eps + rounding, tmax,
-                                         offset + eps + rounding);
+                                         offset + eps + rounding, behind);
 #else
     visibility[gid] = lit_fraction(map, v, s, t, distance_of(cz / cw, v) - offset - eps_axial);
 #endif

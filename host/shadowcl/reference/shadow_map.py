@@ -20,14 +20,17 @@ method's host code: it takes the light's depth maps and view records as plain ar
    lit where the stored surface is not nearer than the receiver's distance minus the bias. Nearest:
    the texel containing the point; bilinear: the depths interpolated first; pcf: the fraction of
    the ``k x k`` texels around the nearest that are lit. Texel indices are clamped to the map.
-5. Bias "plane" reads the maps' triangle ids instead of their depths and lifts nothing: a texel's
-   triangle shadows the start ``s`` when the ray ``s + lambda l`` (``l`` unit, towards the light) hits
-   it for ``tmin < lambda < tmax`` (``tmin`` = eps + rounding, ``tmax`` the light's distance or
-   infinite), or when its plane crosses the ray more than ``ahead`` = ``constant T + tmin`` in front of
-   ``s`` and before the light. Nearest: in shadow when any triangle of the 3 x 3 texels around is hit,
-   or the texel's own triangle shadows; bilinear: lit when the texels not shadowing carry at least half
-   the bilinear weight of the four around; pcf:
-   the fraction of the ``k x k`` texels whose triangle does not shadow. Rounding is
+5. Bias "plane" reads the maps' triangle ids instead of their depths and lifts nothing. For the ray
+   ``s + lambda l`` from the start (``l`` unit, towards the light), a texel's triangle is HIT when the
+   ray meets it for ``tmin < lambda < tmax`` (``tmin`` = eps + rounding, ``tmax`` the light's distance
+   or infinite), BEHIND when it meets it at ``-behind < lambda < tmin``
+   (``behind`` = ``ahead`` without normals, infinite with them: a receiver facing the light), AHEAD
+   when not and its plane crosses the
+   ray more than ``ahead`` = ``constant T + tmin`` in front of ``s`` and before the light. A texel
+   shadows when HIT, or AHEAD unless some texel the filter reads is BEHIND. Nearest (reading the 3 x 3
+   around): in shadow when any is HIT or the own texel shadows; bilinear: lit when the texels not
+   shadowing carry at least half the bilinear weight of the four around; pcf: the fraction of the
+   ``k x k`` texels not shadowing. Rounding is
    ``PRECISION_ULPS`` float32 epsilons of ``extent`` (the largest vertex coordinate) plus the start's
    largest coordinate.
 """
@@ -118,10 +121,14 @@ def lit_fraction(depth_map, record, perspective, s, t, reach, filter, pcf_size=3
     return lit / (2 * half + 1) ** 2
 
 
-def triangle_shadows(triangles, start, direction, tmin, tmax, ahead, slack=0.0):
-    """(N,) bool: whether triangle ``triangles[i]`` ((N, 3, 3); NaN rows for an empty texel) shadows ray i
-    (module docstring, item 5). ``slack`` widens (> 0) or narrows (< 0) the triangles by that much in
-    barycentric coordinates and moves the thresholds by that relative amount: a rounding-sized change."""
+HIT, BEHIND, AHEAD = 1, 2, 3
+
+
+def triangle_verdict(triangles, start, direction, tmin, tmax, ahead, behind, slack=0.0):
+    """(N,) what triangle ``triangles[i]`` ((N, 3, 3); NaN rows for an empty texel) says about ray i: HIT,
+    BEHIND, AHEAD or 0 (module docstring, item 5). ``slack`` widens (> 0) or narrows (< 0) the triangles
+    by that much in barycentric coordinates and moves the thresholds by that relative amount: a
+    rounding-sized change."""
     a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
     u, v = b - a, c - a
     normal = np.cross(u, v)
@@ -134,46 +141,52 @@ def triangle_shadows(triangles, start, direction, tmin, tmax, ahead, slack=0.0):
         qvec = np.cross(w, u)
         gamma = np.einsum("ij,ij->i", direction, qvec) / det
         lam = np.einsum("ij,ij->i", v, qvec) / det
-        inside = (beta >= -slack) & (gamma >= -slack) & (beta + gamma <= 1 + slack)
-        hit = inside & (lam > tmin * (1 + slack)) & (lam < tmax) & (det != 0)
+        inside = (beta >= -slack) & (gamma >= -slack) & (beta + gamma <= 1 + slack) & (det != 0)
+        threshold = tmin * (1 + slack)
+        hit = inside & (lam > threshold) & (lam < tmax)
+        at_or_behind = inside & (lam < threshold) & (lam > -behind)
         facing = np.einsum("ij,ij->i", normal, direction)
         plane = np.einsum("ij,ij->i", normal, a - start) / facing
-        ahead = (facing != 0) & (plane > ahead * (1 + slack)) & (plane < tmax)
-    return np.nan_to_num(hit | ahead, nan=0).astype(bool) & np.isfinite(a[:, 0])
+        in_front = (facing != 0) & (plane > ahead * (1 + slack)) & (plane < tmax)
+    verdict = np.where(hit, HIT, np.where(at_or_behind, BEHIND, np.where(in_front, AHEAD, 0)))
+    return np.where(np.isfinite(a[:, 0]), verdict, 0)
 
 
-def plane_lit_fraction(ids, vertices, faces, start, direction, s, t, tmin, tmax, ahead, filter, pcf_size, slack):
+def plane_lit_fraction(ids, vertices, faces, start, direction, s, t, tmin, tmax, ahead, behind, filter, pcf_size,
+                       slack):
     """(N,) the "plane" bias's visibility from the triangle-id map ``ids`` (R, R) (module docstring, item 5)."""
     res = ids.shape[0]
     padded = np.concatenate([vertices[faces], np.full((1, 3, 3), np.nan)])   # index -1: an empty texel
 
-    def shadows(r, c, limit):
+    def verdict(r, c):
         f = ids[np.clip(r, 0, res - 1), np.clip(c, 0, res - 1)]
-        return triangle_shadows(padded[f], start, direction, tmin, tmax, limit, slack)
+        return triangle_verdict(padded[f], start, direction, tmin, tmax, ahead, behind, slack)
 
+    hit, in_front, seen = np.zeros(len(s)), np.zeros(len(s)), np.zeros(len(s), bool)
     if filter == "bilinear":
         s0, t0 = np.floor(s), np.floor(t)
         fs, ft = s - s0, t - t0
         c, r = s0.astype(np.int64), t0.astype(np.int64)
-        lit = np.zeros(len(s))
         for dr in (0, 1):
             for dc in (0, 1):
                 weight = (fs if dc else 1 - fs) * (ft if dr else 1 - ft)
-                lit += np.where(shadows(r + dr, c + dc, ahead), 0.0, weight)
-        return (lit >= 0.5).astype(np.float64)
+                v = verdict(r + dr, c + dc)
+                hit += np.where(v == HIT, weight, 0.0)
+                in_front += np.where(v == AHEAD, weight, 0.0)
+                seen |= v == BEHIND
+        return (1 - hit - np.where(seen, 0.0, in_front) >= 0.5).astype(np.float64)
     c, r = np.floor(s + 0.5).astype(np.int64), np.floor(t + 0.5).astype(np.int64)
-    if filter == "nearest":
-        hit = shadows(r, c, ahead)
-        for dr in (-1, 0, 1):
-            for dc in (-1, 0, 1):
-                hit |= shadows(r + dr, c + dc, np.inf)
-        return (~hit).astype(np.float64)
-    half = pcf_size // 2
-    lit = np.zeros(len(s))
+    half = 1 if filter == "nearest" else pcf_size // 2
     for dr in range(-half, half + 1):
         for dc in range(-half, half + 1):
-            lit += ~shadows(r + dr, c + dc, ahead)
-    return lit / (2 * half + 1) ** 2
+            v = verdict(r + dr, c + dc)
+            hit += v == HIT
+            in_front += (v == AHEAD) & (filter != "nearest" or (dr == 0 and dc == 0))   # nearest: its own texel's plane
+            seen |= v == BEHIND
+    shadowing = hit + np.where(seen, 0.0, in_front)
+    if filter == "nearest":
+        return (shadowing == 0).astype(np.float64)
+    return 1 - shadowing / (2 * half + 1) ** 2
 
 
 def visibility(points_rel, normals, kind, to_light, views, depth, bias, bias_mode="slope", filter="bilinear",
@@ -228,8 +241,10 @@ def visibility(points_rel, normals, kind, to_light, views, depth, bias, bias_mod
             start = p[sel]
             tmin = eps + PRECISION_ULPS * FLT_EPSILON * (extent + np.abs(start).max(axis=1))
             tmax = dist[sel] if perspective else np.inf
+            ahead = bias[0] * texel[sel] + tmin
+            behind = np.inf if normals is not None else ahead
             out[sel] = plane_lit_fraction(ids[f], np.asarray(vertices, np.float64), faces, start, light_dir[sel], s, t,
-                                          tmin, tmax, bias[0] * texel[sel] + tmin, filter, pcf_size, perturb[2])
+                                          tmin, tmax, ahead, behind, filter, pcf_size, perturb[2])
             continue
         reach = distance_of(z, views[f], perspective) * (1 + perturb[2]) - offset[sel]
         out[sel] = lit_fraction(depth[f], views[f], perspective, s, t, reach, filter, pcf_size)
