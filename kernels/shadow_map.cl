@@ -159,13 +159,24 @@ INLINE float plane_lit_fraction(global const int *ids, global const float *verti
 #else
     const int c = (int)SC_FLOOR(s + 0.5f), r = (int)SC_FLOOR(t + 0.5f);
 #if FILTER == 0
-    const int reach = 1;
+#define SIDE 3
 #else
-    const int reach = PCF_K / 2;
+#define SIDE PCF_K
 #endif
-    for (int dr = -reach; dr <= reach; ++dr)
+    const int reach = SIDE / 2;
+    /* Neighbouring texels mostly hold the same triangle: its verdict is reused from the texel to the
+     * left or above rather than tested again (same answer, a few tests instead of SIDE^2). */
+    int above_f[SIDE], above_v[SIDE];
+    for (int k = 0; k < SIDE; ++k)
+        above_f[k] = -2;
+    for (int dr = -reach; dr <= reach; ++dr) {
+        int left_f = -2, left_v = 0;
         for (int dc = -reach; dc <= reach; ++dc) {
-            const int v = triangle_verdict(vertices, faces, map_triangle(ids, r + dr, c + dc), ray, tmin, tmax, ahead, behind);
+            const int f = map_triangle(ids, r + dr, c + dc), k = dc + reach;
+            const int v = f == left_f ? left_v : (f == above_f[k] ? above_v[k]
+                          : triangle_verdict(vertices, faces, f, ray, tmin, tmax, ahead, behind));
+            left_f = above_f[k] = f;
+            left_v = above_v[k] = v;
             hit += v == HIT;
 #if FILTER == 0
             ahead_weight += v == AHEAD && dr == 0 && dc == 0;   /* the own texel's plane only */
@@ -174,6 +185,8 @@ INLINE float plane_lit_fraction(global const int *ids, global const float *verti
 #endif
             seen |= v == BEHIND;
         }
+    }
+#undef SIDE
 #if FILTER == 0
     return hit > 0.0f || (!seen && ahead_weight > 0.0f) ? 0.0f : 1.0f;
 #else
