@@ -237,8 +237,8 @@ def main() -> None:
     counts = QUICK if args.quick else FULL
     resolutions = args.resolutions or ((512, 2048) if args.quick else RESOLUTIONS)
     new = not args.bench_scenes
-    scenes = new_scenes() if new else [rx.load_scene(s) for s in ("bunny", "ogre", "scenes/default.toml",
-                                                                   "scenes/hard/light_inside.toml")]
+    scenes = new_scenes() if new else [rx.load_scene(s) for s in ("bunny", "ogre", str(rx.PROJECT / "scenes/default.toml"),
+                                                                   str(rx.PROJECT / "scenes/hard/light_inside.toml"))]
     rows = measure(scenes, counts, resolutions, args.biases, args.filters, new)
     ratio = speed_ratio(scenes[0], counts, new)
     stem = args.out or ("shadow-map-bias" + ("" if new else "-bench") + ("-quick" if args.quick else ""))
