@@ -13,6 +13,7 @@ Tolerances:
 
 import numpy as np
 import pytest
+import trimesh
 
 import shadowcl as sc
 from shadowcl import lightspace
@@ -327,16 +328,22 @@ def test_leaks_are_reported_against_exact(device, rng, scene_name, resolution, r
                            f"shadow, first at {leaked[far[0]].tolist()}: {error}")
 
 
-def test_error_falls_as_resolution_rises(device, rng):
+@pytest.mark.parametrize("bias", ["normal", "plane"])
+def test_error_falls_as_resolution_rises(device, rng, bias):
+    """On the floor around a box and a sphere of triangles smaller than a texel at 128 (the plane bias is
+    exact on the box alone: its few large triangles are all in the map), with and without normals. Measured
+    wrong of 20,000 at 128 / 512 / 2048: normal 84 / 34 / 7 with normals; plane 100 / 10 / 2, without 101 / 8 / 1."""
+    sphere = trimesh.creation.icosphere(subdivisions=4, radius=0.25)
     build, light = SCENES["contact"]
-    mesh = build()
+    mesh = sc.Mesh.concatenate([build(), sc.Mesh(sphere.vertices + [1.0, 0.6, -0.6], sphere.faces)])
     points, normals = random_receivers(rng, 20000)
     points *= [1.0, 0.0, 1.0]
     normals = np.tile([0.0, 1.0, 0.0], (len(points), 1))
-    truth = exact_mask(device, mesh, light, points, normals)
-    errors = [mask_error(prepared(device, mesh, light, points, resolution=r).classify(points, normals), truth).wrong
-              for r in (128, 512, 2048)]
-    assert errors[0] > errors[1] > errors[2], errors
+    for given in (normals, None):
+        truth = exact_mask(device, mesh, light, points, given)
+        errors = [mask_error(prepared(device, mesh, light, points, resolution=r, bias=bias).classify(points, given),
+                             truth).wrong for r in (128, 512, 2048)]
+        assert errors[0] > errors[1] > errors[2], (given is not None, errors)
 
 
 def test_dither_is_reproducible_with_a_seed(device, rng):
