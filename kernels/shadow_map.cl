@@ -119,14 +119,14 @@ INLINE int triangle_verdict(global const float *vertices, global const int *face
     LOAD3(vertices, faces[3 * f], ax, ay, az);
     LOAD3(vertices, faces[3 * f + 1], bx, by, bz);
     LOAD3(vertices, faces[3 * f + 2], cx, cy, cz);
-    if (wt_hit(ray, ax, ay, az, bx, by, bz, cx, cy, cz, tmin, tmax))
-        return HIT;
-    if (wt_hit(ray, ax, ay, az, bx, by, bz, cx, cy, cz, -behind, tmin))
-        return BEHIND;
     const float ux = bx - ax, uy = by - ay, uz = bz - az, vx = cx - ax, vy = cy - ay, vz = cz - az;
     const float nx = uy * vz - uz * vy, ny = uz * vx - ux * vz, nz = ux * vy - uy * vx;
     const float facing = dot3(nx, ny, nz, ray->dx, ray->dy, ray->dz);
     const float lambda = dot3(nx, ny, nz, ax - ray->ox, ay - ray->oy, az - ray->oz) / facing;
+    /* One watertight test over both intervals; the plane's lambda says which (they differ by rounding
+     * only, where lambda is within rounding of tmin) */
+    if (wt_hit(ray, ax, ay, az, bx, by, bz, cx, cy, cz, -behind, tmax))
+        return lambda > tmin ? HIT : BEHIND;
     return facing != 0.0f && lambda > ahead && lambda < tmax ? AHEAD : 0;   /* a plane along the ray: none */
 }
 
@@ -169,12 +169,26 @@ INLINE float plane_lit_fraction(global const int *ids, global const float *verti
     int above_f[SIDE], above_v[SIDE];
     for (int k = 0; k < SIDE; ++k)
         above_f[k] = -2;
+#if FILTER == 0
+    /* The own texel first: in a shadow it is usually hit, and one hit decides */
+    const int own_f = map_triangle(ids, r, c);
+    const int own_v = triangle_verdict(vertices, faces, own_f, ray, tmin, tmax, ahead, behind);
+    if (own_v == HIT)
+        return 0.0f;
+#endif
     for (int dr = -reach; dr <= reach; ++dr) {
         int left_f = -2, left_v = 0;
         for (int dc = -reach; dc <= reach; ++dc) {
             const int f = map_triangle(ids, r + dr, c + dc), k = dc + reach;
+#if FILTER == 0
+            const int v = f == own_f ? own_v : (f == left_f ? left_v : (f == above_f[k] ? above_v[k]
+                          : triangle_verdict(vertices, faces, f, ray, tmin, tmax, ahead, behind)));
+            if (v == HIT)
+                return 0.0f;
+#else
             const int v = f == left_f ? left_v : (f == above_f[k] ? above_v[k]
                           : triangle_verdict(vertices, faces, f, ray, tmin, tmax, ahead, behind));
+#endif
             left_f = above_f[k] = f;
             left_v = above_v[k] = v;
             hit += v == HIT;
