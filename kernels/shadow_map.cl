@@ -134,10 +134,10 @@ INLINE int triangle_verdict(global const float *vertices, global const int *face
  * the texels the filter reads (nearest: the 3 x 3 around, as the texel's own triangle may not be the
  * one above s near a silhouette). A texel shadows s when its triangle is HIT, or AHEAD unless some
  * texel's triangle is BEHIND (then the light sees s's own surface there, and only an exact hit
- * shadows it: no plane continued from a neighbouring face across an edge). Nearest: in shadow when any of the 3 x 3 is HIT or the own texel shadows;
- * bilinear: lit when the texels not shadowing carry at least half of the bilinear weight of the four
- * around (a binary answer, as Williams' interpolated depth gives); pcf: the fraction of the k x k
- * texels not shadowing. */
+ * shadows it: no plane continued from a neighbouring face across an edge). Nearest: in shadow
+ * when any of the 3 x 3 is HIT or the own texel shadows; bilinear: lit when the texels not shadowing
+ * carry at least half of the bilinear weight of the four around (a binary answer, as Williams'
+ * interpolated depth gives); pcf: the fraction of the k x k texels not shadowing. */
 INLINE float plane_lit_fraction(global const int *ids, global const float *vertices, global const int *faces,
                                 const WtRay *ray, const float s, const float t, const float tmin, const float tmax,
                                 const float ahead, const float behind)
@@ -150,7 +150,8 @@ INLINE float plane_lit_fraction(global const int *ids, global const float *verti
     for (int dr = 0; dr <= 1; ++dr)
         for (int dc = 0; dc <= 1; ++dc) {
             const float weight = (dc ? fs : 1.0f - fs) * (dr ? ft : 1.0f - ft);
-            const int v = triangle_verdict(vertices, faces, map_triangle(ids, r + dr, c + dc), ray, tmin, tmax, ahead, behind);
+            const int f = map_triangle(ids, r + dr, c + dc);
+            const int v = triangle_verdict(vertices, faces, f, ray, tmin, tmax, ahead, behind);
             hit += v == HIT ? weight : 0.0f;
             ahead_weight += v == AHEAD ? weight : 0.0f;
             seen |= v == BEHIND;
