@@ -113,11 +113,15 @@ def shadow_map_cells() -> tuple[str, str]:
                 errs.append(mine[0]["error_percent"])
         if ratios:
             parts.append(f"{resolution}: {span(ratios)}× ({span(errs)} %)")
-    ratio = new["speed_ratio"]
-    speed = (f"query time, plane / normal offset at 2048: {ratio['with']['plane'] / ratio['with']['normal']:.1f}x "
-             f"with normals, {ratio['without']['plane'] / ratio['without']['normal']:.1f}x without "
-             f"({ratio['scene']}){src('shadow-map-bias.json')}; run.py's default of its day, time / exact's on the models (error): "
-             + ", ".join(parts) + src(name))
+    def ratios(doc: dict) -> str:
+        r = doc["speed_ratio"]
+        return (f"{r['scene']}: plane / normal offset {r['with']['plane'] / r['with']['normal']:.1f}x with normals, "
+                f"{r['without']['plane'] / r['without']['normal']:.1f}x without; plane / exact "
+                f"{r['with']['plane'] / r['with']['exact']:.1f}x, {r['without']['plane'] / r['without']['exact']:.1f}x")
+
+    speed = (f"query time at 2048, {ratios(new)}{src('shadow-map-bias.json')}; {ratios(bench)}"
+             f"{src('shadow-map-bias-bench.json')}; run.py's default of its day, time / exact's on the models "
+             "(error): " + ", ".join(parts) + src(name))
     return error, speed
 
 

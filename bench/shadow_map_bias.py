@@ -187,13 +187,14 @@ def measure(scenes, counts, resolutions, biases, filters, new: bool) -> list[dic
 
 
 def speed_ratio(scene: rx.BenchScene, counts: dict, new: bool, repeats: int = 5) -> dict:
-    """Query time of "plane" over "normal" at 2048, nearest, interleaved medians (both prepared once)."""
+    """Query time of "plane", "normal" (2048, nearest) and the exact method, interleaved medians (each prepared once)."""
     points, normals = scene_receivers(scene, counts, new)
     bounds = np.stack([points.min(0), points.max(0)])
     out = {}
     for given in (True, False):
         prepared = {bias: sc.prepare(scene.mesh, scene.lights[0], "shadow_map", bounds=bounds, bias=bias)
                     for bias in ("plane", "normal")}
+        prepared["exact"] = sc.prepare(scene.mesh, scene.lights[0], "exact", bounds=bounds)
         timings = interleaved({bias: (lambda s=s: s.mask(points, normals if given else None))
                                for bias, s in prepared.items()}, repeats)
         out["with" if given else "without"] = {bias: t.median for bias, t in timings.items()}
@@ -259,8 +260,9 @@ def main() -> None:
             "with the same normals (or none). Lights: " + "; ".join(f"{s.name}: " + ", ".join(map(str, s.lights))
                                                                     for s in scenes[:1]) + ".", "",
             f"Query time, {scenes[0].name} light 0 at 2048 nearest, interleaved medians of 5: " +
-            ", ".join(f"{k} normals: plane {v['plane']:.3f} s, normal {v['normal']:.3f} s "
-                      f"(ratio {v['plane'] / v['normal']:.2f})" for k, v in ratio.items()) + ".", "",
+            ", ".join(f"{k} normals: plane {v['plane']:.3f} s, normal {v['normal']:.3f} s, exact {v['exact']:.3f} s "
+                      f"(plane / normal {v['plane'] / v['normal']:.2f}, plane / exact {v['plane'] / v['exact']:.2f})"
+                      for k, v in ratio.items()) + ".", "",
             "## Summary over scenes and lights", "", summary(rows), "", "## Every case", "", table(rows), ""]
     (RESULTS / f"{stem}.md").write_text("\n".join(text))
     print(summary(rows))
