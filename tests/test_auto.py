@@ -58,20 +58,20 @@ def test_choice_follows_the_measured_bounds(device, monkeypatch):
     monkeypatch.setattr(auto, "OVERHEAD_SHARE", 1e9)
     mesh, light, points, normals = shape_on_ground("torus", 400_000)
     box = np.array([points.min(0), points.max(0)])
-    shadows = sc.prepare(mesh, light, "auto", bounds=box, device=device, receivers=(points, None), max_error=1e-2)
+    shadows = sc.prepare(mesh, light, "auto", bounds=box, device=device, receivers=(points, None), max_error=1e-3)
     calibration = shadows.stats["calibration"]
     measured = [record for record in calibration["tried"] if "error" in record]
     assert measured, calibration
     for record in measured:
         n, e = calibration["sample"], record["wrong"]
         assert record["upper_bound"] == pytest.approx(beta.ppf(0.99, e + 1, n - e))
-        assert record["passes"] == (record["upper_bound"] <= 1e-2)
+        assert record["passes"] == (record["upper_bound"] <= 1e-3)
     assert [r["passes"] for r in measured].count(True) <= 1 and measured[-1]["passes"] == (shadows.stats["chosen"] != "exact")
-    # without normals the shadow maps' acne on the shape breaks the budget: their records show it
+    # the coarsest shadow map misses the budget here (0.37 % wrong on this sample): its record shows it
     assert any(r["method"] == "shadow_map" and not r["passes"] for r in measured)
     chosen = shadows.params["chosen"]
     truth = sc.shadow_mask(mesh, light, points, device=device)
-    assert np.mean(shadows.mask(points) != truth) <= 1e-2
+    assert np.mean(shadows.mask(points) != truth) <= 1e-3
     assert chosen["method"] == shadows.stats["chosen"]
 
 
