@@ -253,7 +253,7 @@ def level_errors(device, mesh: Mesh, light, points, normals, eps: float, levels=
 
 
 # auto ------------------------------------------------------------------------------------------------
-def sample_size(max_error: float, pass_share: float = PASS_SHARE) -> int:
+def sample_size(max_error: float, pass_share: float = PASS_SHARE, minimum: int = MIN_SAMPLE) -> int:
     """Calibration receivers for an error budget ``max_error`` (a fraction of receivers).
 
     A level passes when the one-sided 99 % Clopper-Pearson upper bound of its error is within the budget
@@ -261,14 +261,14 @@ def sample_size(max_error: float, pass_share: float = PASS_SHARE) -> int:
     level measured at ``pass_share`` (default :data:`PASS_SHARE`) of the budget still passes: the normal approximation
     ``n = z^2 r / ((1 - r)^2 b)`` (108,206 for ``b = 0.001``, ``r = 0.8``, ``z = 2.326``) grown in 1 %
     steps until the exact bound agrees: 128,158 receivers for ``b = 0.001``, an expected 128 wrong at the
-    budget. Clamped to [MIN_SAMPLE, MAX_SAMPLE] (MAX_SAMPLE for b = 0, or any b below ~3e-4).
+    budget. Clamped to [minimum (default MIN_SAMPLE), MAX_SAMPLE] (MAX_SAMPLE for b = 0, or any b below ~3e-4).
     """
     if max_error <= 0:
         return MAX_SAMPLE
     n = math.ceil(CONFIDENCE_Z ** 2 * pass_share / ((1 - pass_share) ** 2 * max_error))
     while n < MAX_SAMPLE and upper_bound(math.floor(pass_share * max_error * n), n) > max_error:
         n = math.ceil(1.01 * n)
-    return int(min(MAX_SAMPLE, max(MIN_SAMPLE, n)))
+    return int(min(MAX_SAMPLE, max(minimum, n)))
 
 
 def upper_bound(wrong: int, receivers: int) -> float:
