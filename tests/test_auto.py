@@ -12,6 +12,7 @@ from scipy.stats import beta
 import shadowcl as sc
 from shadowcl import auto
 from shadowcl.lod import sample_size
+from shadowcl.methods import default_eps
 from shadowcl.render import render_report
 
 
@@ -144,3 +145,39 @@ def test_cli_prints_the_choice(tmp_path, capsys):
     assert main(["render", "--out", str(out), "--size", "640x480", "--method", "auto", "--param", "max_error=0.01"]) == 0
     printed = capsys.readouterr().out
     assert "light 0: auto chose " in printed and "for budget 0.01" in printed and "; sample: " in printed
+
+
+@pytest.mark.parametrize("with_normals", [False, True])
+def test_lod_auto_calibrates_on_the_callers_receivers(with_normals, device):
+    from shadowcl import lod
+
+    mesh, light, points, normals = shape_on_ground("torus", 400_000)
+    normals = normals if with_normals else None
+    truth = sc.shadow_mask(mesh, light, points, normals, device=device)
+    answer = sc.shadow_mask(mesh, light, points, normals, method="shadow_volume", lod="auto", max_error=1e-2,
+                            device=device)
+    assert np.mean(answer != truth) <= 1e-2
+    box = np.array([points.min(0), points.max(0)])
+    calibration = lod.calibrate(device, mesh, light, box, default_eps(mesh.bounds), 1e-2, (points, normals))   # cached
+    assert calibration.receivers == sample_size(1e-2, auto.PASS_SHARE, auto.MIN_SAMPLE)
+
+
+def test_lod_auto_reuses_a_calibration_within_a_light_bin(device):
+    """Frames of a moving light share their bin's calibration; a light moved across bins calibrates anew."""
+    from shadowcl import lod
+
+    mesh, light, points, normals = shape_on_ground("csg_box", 400_000)
+    box = np.array([points.min(0), points.max(0)])
+    first = lod.calibrate(device, mesh, light, box, 1e-3, 1e-2, (points, normals))
+    centre = box.mean(axis=0)
+    turn = lambda degrees: sc.PointLight(centre + _rotated_y(light.position - centre, degrees))   # noqa: E731
+    assert lod._light_bin(turn(0.5), box) == lod._light_bin(light, box)
+    assert lod.calibrate(device, mesh, turn(0.5), box, 1e-3, 1e-2, (points, normals)) is first
+    assert lod._light_bin(turn(30.0), box) != lod._light_bin(light, box)
+    assert lod.calibrate(device, mesh, turn(30.0), box, 1e-3, 1e-2, (points, normals)) is not first
+
+
+def _rotated_y(vector, degrees: float) -> np.ndarray:
+    a = np.radians(degrees)
+    rotation = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
+    return rotation @ vector

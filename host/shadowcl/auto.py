@@ -68,6 +68,13 @@ CANDIDATES = (
 )
 
 
+def calibration_receivers(given) -> Points | None:
+    """The ``receivers=`` parameter checked: None, a ``Points``, points (N, 3) or ``(points, normals)``."""
+    if given is None or isinstance(given, Points):
+        return given
+    return check_points(*given) if isinstance(given, tuple) and len(given) == 2 else check_points(given)
+
+
 def calibration_sample(receivers: Points, count: int, seed: int = SAMPLE_SEED) -> Points:
     """``count`` of ``receivers`` drawn uniformly without replacement (seeded), their normals with them."""
     rng = np.random.default_rng(seed)
@@ -112,13 +119,7 @@ class AutoMethod(Method):
         if self.max_error >= 1:
             raise ValueError(f"max_error: must be below 1 (a fraction of receivers), got {self.max_error!r}")
         self.max_time = None if p["max_time"] is None else positive_float("max_time", p["max_time"])
-        given = p["receivers"]
-        if given is None or isinstance(given, Points):
-            self.receivers = given
-        elif isinstance(given, tuple) and len(given) == 2:
-            self.receivers = check_points(*given)
-        else:
-            self.receivers = check_points(given)
+        self.receivers = calibration_receivers(p["receivers"])
         expected = p["expected_receivers"]
         self.expected = None if expected is None else positive_int("expected_receivers", expected)
         self.chosen: Method | None = None
