@@ -21,10 +21,12 @@ How the choice is made (:meth:`AutoMethod.prepare`):
    (:data:`CANDIDATES`) are tried in order of their predicted cost, each prepared for the receiver box,
    timed and measured on the sample. A candidate passes when the one-sided 99 % Clopper-Pearson upper
    bound of its error rate (:func:`shadowcl.lod.upper_bound`) is within ``max_error``, and it is chosen
-   when its predicted time on all receivers also beats exact's. The search stops at the first
-   chosen, and before any trial predicted to push the calibration's spending past
-   :data:`OVERHEAD_SHARE` of exact's predicted time (or past ``max_time``): exact answers then, so the
-   overhead over exact is bounded by about that share plus one trial.
+   when its predicted time on all receivers is also below :data:`CHOICE_MARGIN` of exact's (the
+   prediction scales the sample's time by N / n and by how that scaling held on this device before,
+   :data:`_SCALING`). The search stops at the first chosen, and skips any trial predicted to push the
+   calibration's spending past :data:`OVERHEAD_SHARE` of exact's predicted time (or past ``max_time``)
+   or unable to beat exact: exact answers then, so the overhead over exact is bounded by about that
+   share plus one trial, and reported (``stats["calibration"]``: ``seconds``, ``trials_s``).
 
 A candidate that refuses the query (a method that cannot take the light) is skipped and listed so.
 """
