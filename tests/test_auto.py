@@ -181,3 +181,11 @@ def _rotated_y(vector, degrees: float) -> np.ndarray:
     a = np.radians(degrees)
     rotation = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
     return rotation @ vector
+
+
+def test_max_time_caps_the_trials(device):
+    mesh, light, points, normals = shape_on_ground("torus", 400_000)
+    shadows = sc.prepare(mesh, light, "auto", device=device, receivers=(points, normals), max_error=1e-2, max_time=1e-9)
+    calibration = shadows.stats["calibration"]
+    assert shadows.params["chosen"] == {"method": "exact"} and calibration["trials_s"] == 0.0
+    assert calibration["tried"] and all("skipped" in record for record in calibration["tried"])
