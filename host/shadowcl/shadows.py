@@ -8,12 +8,14 @@
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
 
 from .checks import check_bounds
 from .device import get_device
+from .frame import check_clearance, frame_for, is_distant, union
 from .geometry import bounds_diagonal
 from .lights import check_light
 from .methods import as_mesh, method_class, occluders, resolve_eps, with_receiver_count
@@ -29,6 +31,9 @@ class Shadows:
     ``check_s`` its receiver check, ``device_bytes``, ``receivers``, ``outside_bounds``, then the
     method's own keys). Points outside ``bounds`` are answered correctly too: a method that cannot
     (a shadow map's single view) answers them from a second structure fitted to them.
+
+    The method works in the occluders' frame (:mod:`shadowcl.frame`): everything it sees is moved and
+    scaled there first, and inputs outside the working range are refused there.
     """
 
     def __init__(self, scene_or_mesh, light, method: str = "exact", bounds=None, device=None, eps=None,
@@ -40,7 +45,10 @@ class Shadows:
         self.eps = resolve_eps(cls, eps, mesh.bounds)
         self.bounds = mesh.bounds.astype(np.float64) if bounds is None else check_bounds("bounds", bounds)
         self._device = get_device(device)
-        self._occluders = occluders(cls, scene_or_mesh)
+        self._mesh = mesh
+        self._frame = frame_for(mesh, move=not cls.scene_input)
+        self._reach = union(mesh.bounds, self.bounds)   # the box a point light is judged distant for
+        self._occluders = occluders(cls, scene_or_mesh) if cls.scene_input else self._frame.mesh(mesh)
         self._params = params
         self._instance = cls(self._device, **params)
         self._prepare_s = self._classify_s = self._check_s = 0.0
@@ -52,8 +60,11 @@ class Shadows:
         """Build the structure again for another ``light``, on the same method instance: what does not
         depend on the light is kept, and a silhouette tracker has the last light's frame."""
         self.light = check_light(light)
+        check_clearance(self._mesh, self.light, self._instance.min_light_clearance, self.method)
         start = time.perf_counter()
-        self._instance.prepare(self._occluders, self.light, self.bounds, self.eps)
+        frame = self._frame
+        self._instance.prepare(self._occluders, self._method_light(self._reach), frame.points(self.bounds),
+                               frame.length(self.eps))
         self._device.queue.finish()
         self._prepare_s = time.perf_counter() - start
 
@@ -74,8 +85,10 @@ class Shadows:
     def _query(self, kind: str, points, normals) -> np.ndarray:
         start = time.perf_counter()
         receivers = check_points(points, normals)
-        checked = time.perf_counter()
+        self._check_reach(receivers)
         outside = self._outside_bounds(receivers)
+        receivers = self._frame.receivers(receivers)
+        checked = time.perf_counter()
         if self._instance.bounded and len(outside):
             inside = np.ones(len(receivers), dtype=bool)
             inside[outside] = False
@@ -89,6 +102,28 @@ class Shadows:
         self._outside, self._receivers = len(outside), len(receivers)
         return answer
 
+    def classify_view(self, view, zbuffer, seen) -> np.ndarray:
+        """An ``image_space`` method's mask of the camera's covered pixels (:meth:`Method.classify_view`),
+        with the camera's view and receivers moved to the method's frame."""
+        frame = self._frame
+        self._check_reach(check_points(seen.points))
+        framed = frame.view(view)
+        return self._instance.classify_view(framed, dataclasses.replace(zbuffer, view=framed),
+                                            dataclasses.replace(seen, points=frame.points(seen.points)))
+
+    def _method_light(self, reach: np.ndarray):
+        """The light as the method gets it (:meth:`shadowcl.frame.Frame.light`) for receivers in ``reach``."""
+        return self._frame.light(self.light, reach, self._instance.point_light_reach)
+
+    def _check_reach(self, receivers: Points) -> None:
+        """A point light used as directional for ``bounds`` must stay distant for these receivers too."""
+        limit = self._instance.point_light_reach
+        if len(receivers) and is_distant(self.light, self._reach, limit) \
+                and not is_distant(self.light, union(self._reach, receivers.bounds), limit):
+            raise ValueError(f"points: the light was used as a directional light for receivers in {self.bounds.tolist()}; "
+                             f"these reach {receivers.bounds.tolist()}, where it is not parallel enough: "
+                             f"prepare with bounds covering them")
+
     def _outside_bounds(self, receivers: Points) -> np.ndarray:
         """Indices of the receivers outside ``bounds`` (with :data:`BOUNDS_SLACK`); cheap when none is."""
         slack = BOUNDS_SLACK * max(bounds_diagonal(self.bounds), np.finfo(np.float32).tiny)
@@ -99,9 +134,10 @@ class Shadows:
         return np.flatnonzero(np.any((p < low) | (p > high), axis=1))
 
     def _fitted_to(self, receivers: Points):
-        """A second instance of the method, prepared for the box of ``receivers`` (outside ``bounds``)."""
+        """A second instance of the method, prepared for the box of (framed) ``receivers`` (outside ``bounds``)."""
         instance = type(self._instance)(self._device, **self._params)
-        instance.prepare(self._occluders, self.light, receivers.bounds, self.eps)
+        instance.prepare(self._occluders, self._method_light(self._reach), receivers.bounds,
+                         self._frame.length(self.eps))
         return instance
 
     # what was built ------------------------------------------------------------------------------------
