@@ -540,8 +540,8 @@ class AngularMethod(Method):
     """
 
     name = "angular"
-    point_light_reach = 2.0 ** 6    # measured (bench/distant_lights.py): the span table fails from ~1e3 sizes
-    min_light_clearance = 1e-5      # measured: a light on an edge or vertex loses every shadow
+    point_light_reach = 2.0 ** 6    # measured (bench/range.py): the span table fails from ~1e3 sizes
+    min_light_clearance = 1e-5      # measured (bench/range.py): right from 1e-7 off a surface, not on it
     image_space = True
     parameters = {
         "theta_resolution": (None, "rows of the table (theta steps; Y steps for a directional light); None picks "

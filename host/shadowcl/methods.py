@@ -30,7 +30,7 @@ Optional capabilities are declared on the class, never found by ``hasattr``:
 - ``bounded``: ``classify`` is right only inside the ``receiver_bounds`` given to ``prepare`` (a single
   shadow-map view); :class:`shadowcl.Shadows` then answers points outside by a second preparation.
 - ``point_light_reach``: how many scene sizes away the method's float32 arithmetic still answers a
-  point light right (measured, bench/distant_lights.py); :class:`shadowcl.Shadows` gives a point light
+  point light right (measured, bench/range.py); :class:`shadowcl.Shadows` gives a point light
   farther than that the method as the directional light from the scene (:mod:`shadowcl.frame`).
 - ``min_light_clearance``: the closest a point light may come to an occluding triangle, as a fraction
   of the occluders' box diagonal (measured there too); a closer light is refused.

@@ -344,8 +344,8 @@ class ShadowVolumeMethod(Method):
     ``silhouettes_missed``, stage times)."""
 
     name = "shadow_volume"
-    point_light_reach = 2.0 ** 12   # measured (bench/distant_lights.py): wrong from ~3e4 sizes
-    min_light_clearance = 1e-5      # measured: within ~1e-7 of a face most of the shadow is lost
+    point_light_reach = 2.0 ** 12   # measured (bench/range.py): wrong from ~3e4 sizes
+    min_light_clearance = 1e-4      # measured (bench/range.py): right from 1e-5 off a surface, not at 1e-6
     image_space = True
     parameters = {
         "lod": (None, "occluder level of detail: None (full mesh), a level index of shadowcl.lod.levels, or 'auto' "

@@ -17,7 +17,7 @@ from .checks import check_bounds
 from .device import get_device
 from .frame import check_clearance, frame_for, is_distant, union
 from .geometry import bounds_diagonal
-from .lights import check_light
+from .lights import PointLight, check_light
 from .methods import as_mesh, method_class, occluders, resolve_eps, with_receiver_count
 from .points import BOUNDS_SLACK, Points, check_points
 
@@ -63,8 +63,8 @@ class Shadows:
         check_clearance(self._mesh, self.light, self._instance.min_light_clearance, self.method)
         start = time.perf_counter()
         frame = self._frame
-        self._instance.prepare(self._occluders, self._method_light(self._reach), frame.points(self.bounds),
-                               frame.length(self.eps))
+        self._frame_light = self._method_light(self._reach)
+        self._instance.prepare(self._occluders, self._frame_light, frame.points(self.bounds), frame.length(self.eps))
         self._device.queue.finish()
         self._prepare_s = time.perf_counter() - start
 
@@ -98,6 +98,7 @@ class Shadows:
             answer[outside] = getattr(self._fitted_to(beyond), kind)(beyond)
         else:
             answer = getattr(self._instance, kind)(receivers)
+        answer[self._at_the_light(receivers)] = True if kind == "visibility" else False
         self._check_s, self._classify_s = checked - start, time.perf_counter() - start
         self._outside, self._receivers = len(outside), len(receivers)
         return answer
@@ -114,6 +115,20 @@ class Shadows:
     def _method_light(self, reach: np.ndarray):
         """The light as the method gets it (:meth:`shadowcl.frame.Frame.light`) for receivers in ``reach``."""
         return self._frame.light(self.light, reach, self._instance.point_light_reach)
+
+    def _at_the_light(self, receivers: Points) -> np.ndarray:
+        """Indices of the (framed) receivers whose tested segment is at most eps long and whose normal (if
+        any) faces the light: lit by DESIGN.md's meaning (no hit lies beyond eps), whatever a method's
+        projection makes of a point at its eye. Cheap when the light is outside the receivers' box."""
+        light, eps = self._frame_light, self._frame.length(self.eps)
+        if not isinstance(light, PointLight) or len(receivers) == 0 or \
+                np.any(light.position < receivers.bounds[0] - 2 * eps) or np.any(light.position > receivers.bounds[1] + 2 * eps):
+            return np.zeros(0, dtype=np.int64)
+        start = receivers.positions
+        if receivers.normals is not None:
+            start = start + eps * receivers.unit_normals()
+        short = np.linalg.norm(light.position - start, axis=1) <= eps
+        return np.flatnonzero(short & ~receivers.facing_away(light))
 
     def _check_reach(self, receivers: Points) -> None:
         """A point light used as directional for ``bounds`` must stay distant for these receivers too."""
