@@ -66,7 +66,14 @@ Pipeline (kernels/angular.cl):
    slower to build (1.33 s against 0.44 s at 100 000 cubes: the loops are chained on the host), though
    faster to look up (0.060 s against 0.095 s for 500 000 receivers; a table 3.8 x smaller). Exact depth
    from face planes also holds on every mesh without the chord's assumptions (no layered folds of one
-   lit region, a cap convex between creases).
+   lit region, a cap convex between creases). But a face record is the face's cut by the row's *centre*:
+   a receiver lying on a closed occluder's lit cap, up to half a row off it, meets the plane of a
+   neighbouring face extended past its edge, above a convex cap, and is falsely shadowed
+   (bench/results/angular_caps.md: 12-21 % of such receivers on a sphere, torus or cylinder under a
+   directional light, 0.25-7 % with the loop table, whose chord lies below the cap). Requiring the ray to
+   cross the listed face removes those (0 on the sphere) but turns the listings a row's centre misses
+   into false lights in the shadow (ground receivers: 9 -> 55-110 of 1,500): that needs spans over the
+   whole row, not done.
 4. **Lookups**: per receiver, its row and ``s``; a binary search finds the records starting at or
    before ``s``, a backward scan tests them (first hit wins) and stops where the row's running maximum
    of ``s_hi`` falls below ``s`` (section 7 step 2, without walking the whole entry). ``classify_view``
