@@ -59,12 +59,14 @@ def ground_points(rng, count: int = 400, half: float = 3.0):
 def free_receivers(method, mesh, light, points, normals, eps):
     """Receivers where ``method`` may answer either way (module docstring), for a query in the world."""
     v, f = mesh.vertices, mesh.faces
-    lo, hi = np.minimum(mesh.bounds[0], points.min(0)), np.maximum(mesh.bounds[1], points.max(0))
-    size = float(np.linalg.norm(hi - lo))
-    band = max(FLOAT_BAND, METHOD_BAND[method]) * size
+    # The method's band is the occluders' (a far receiver must not widen it: that would hide a map
+    # coarsened by it); rounding grows with a receiver's own distance from them.
+    occluders = float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0]))
+    distance = np.linalg.norm(points - 0.5 * (mesh.bounds[0] + mesh.bounds[1]), axis=1)
+    band = np.maximum(FLOAT_BAND * np.maximum(occluders, distance), METHOD_BAND[method] * occluders)
     free = ref.segment_edge_distance(v, f, light, points, normals, eps) < band
-    free |= ref.shadow_mask(v, f, light, points, normals, eps, margin=FLOAT_BAND * size) != \
-        ref.shadow_mask(v, f, light, points, normals, eps, margin=-FLOAT_BAND * size)
+    free |= ref.shadow_mask(v, f, light, points, normals, eps, margin=FLOAT_BAND * occluders) != \
+        ref.shadow_mask(v, f, light, points, normals, eps, margin=-FLOAT_BAND * occluders)
     reach = union(mesh.bounds, np.stack([points.min(0), points.max(0)]))
     if is_distant(light, reach, method_class(method).point_light_reach):
         parallel = sc.DirectionalLight(0.5 * (reach[0] + reach[1]) - light.position)

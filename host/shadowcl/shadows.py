@@ -26,11 +26,14 @@ class Shadows:
     """One method prepared for one scene and light: query it with :meth:`mask` and :meth:`visibility`.
 
     Made by :func:`prepare`. Attributes: ``method`` (its name), ``light``, ``eps`` (absolute),
-    ``bounds`` ((2, 3) box the structure is fitted to), ``params`` (every parameter as resolved from the
+    ``bounds`` ((2, 3) the receivers' box the structure is fitted to), ``params`` (every parameter as resolved from the
     scene: what a None default became), ``stats`` (``prepare_s``, ``classify_s`` of the last query,
     ``check_s`` its receiver check, ``device_bytes``, ``receivers``, ``outside_bounds``, then the
     method's own keys). Points outside ``bounds`` are answered correctly too: a method that cannot
-    (a shadow map's single view) answers them from a second structure fitted to them.
+    (a shadow map's single view) answers them from a second structure fitted to them. Such a method's
+    structure is fitted to ``bounds`` cut to :data:`NEAR` occluder sizes round the occluders, so that a
+    few far receivers never coarsen everyone's map; of the receivers beyond, those whose segment to the
+    light misses the occluders' box are lit (nothing can block it), the others get the second structure.
 
     The method works in the occluders' frame (:mod:`shadowcl.frame`): everything it sees is moved and
     scaled there first, and inputs outside the working range are refused there.
@@ -48,6 +51,7 @@ class Shadows:
         self._mesh = mesh
         self._frame = frame_for(mesh, move=not cls.scene_input)
         self._reach = union(mesh.bounds, self.bounds)   # the box a point light is judged distant for
+        self._fitted_box = near_box(self.bounds, mesh.bounds) if cls.bounded else self.bounds
         self._occluders = occluders(cls, scene_or_mesh) if cls.scene_input else self._frame.mesh(mesh)
         self._params = params
         self._instance = cls(self._device, **params)
@@ -64,7 +68,7 @@ class Shadows:
         start = time.perf_counter()
         frame = self._frame
         self._frame_light = self._method_light(self._reach)
-        self._instance.prepare(self._occluders, self._frame_light, frame.points(self.bounds), frame.length(self.eps))
+        self._instance.prepare(self._occluders, self._frame_light, frame.points(self._fitted_box), frame.length(self.eps))
         self._device.queue.finish()
         self._prepare_s = time.perf_counter() - start
 
@@ -95,7 +99,13 @@ class Shadows:
             beyond = receivers.subset(outside)
             answer = np.empty(len(receivers), dtype=bool if kind == "classify" else np.float32)
             answer[inside] = getattr(self._instance, kind)(receivers.subset(inside))
-            answer[outside] = getattr(self._fitted_to(beyond), kind)(beyond)
+            # Beyond: a segment that misses the occluders' box is lit, unless its normal faces away.
+            reaching = self._reaching(beyond)
+            answer[outside] = beyond.facing_away(self._frame_light) if kind == "classify" \
+                else (~beyond.facing_away(self._frame_light)).astype(np.float32)
+            if np.any(reaching):
+                candidates = beyond.subset(reaching)
+                answer[outside[reaching]] = getattr(self._fitted_to(candidates), kind)(candidates)
         else:
             answer = getattr(self._instance, kind)(receivers)
         answer[self._at_the_light(receivers)] = True if kind == "visibility" else False
@@ -130,6 +140,29 @@ class Shadows:
         short = np.linalg.norm(light.position - start, axis=1) <= eps
         return np.flatnonzero(short & ~receivers.facing_away(light))
 
+    def _reaching(self, receivers: Points) -> np.ndarray:
+        """bool (N,): the tested segment (ray) of each framed receiver meets the occluders' box (slab test
+        in float64, the box widened by 1e-6 of its size)."""
+        box = self._frame.points(self._mesh.bounds)
+        box = box + np.array([[-1.0], [1.0]]) * 1e-6 * max(float(np.linalg.norm(box[1] - box[0])), 1e-300)
+        start = receivers.positions
+        if receivers.normals is not None:
+            start = start + self._frame.length(self.eps) * receivers.unit_normals()
+        light = self._frame_light
+        if isinstance(light, PointLight):
+            direction, end = light.position - start, 1.0
+        else:
+            direction, end = np.broadcast_to(-light.direction, start.shape), np.inf
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t0, t1 = (box[0] - start) / direction, (box[1] - start) / direction
+        low, high = np.fmin(t0, t1), np.fmax(t0, t1)
+        # a zero component: inside that slab for every t (nan -> ignored by fmax/fmin) or never
+        parallel = direction == 0
+        outside_slab = parallel & ((start < box[0]) | (start > box[1]))
+        enter = np.fmax(np.max(np.where(parallel, -np.inf, low), axis=1), 0.0)
+        leave = np.fmin(np.min(np.where(parallel, np.inf, high), axis=1), end)
+        return (enter <= leave) & ~np.any(outside_slab, axis=1)
+
     def _check_reach(self, receivers: Points) -> None:
         """A point light used as directional for ``bounds`` must stay distant for these receivers too."""
         limit = self._instance.point_light_reach
@@ -140,9 +173,11 @@ class Shadows:
                              f"prepare with bounds covering them")
 
     def _outside_bounds(self, receivers: Points) -> np.ndarray:
-        """Indices of the receivers outside ``bounds`` (with :data:`BOUNDS_SLACK`); cheap when none is."""
-        slack = BOUNDS_SLACK * max(bounds_diagonal(self.bounds), np.finfo(np.float32).tiny)
-        low, high = self.bounds[0] - slack, self.bounds[1] + slack
+        """Indices of the receivers outside the box the structure is fitted to (with :data:`BOUNDS_SLACK`);
+        cheap when none is."""
+        box = self._fitted_box
+        slack = BOUNDS_SLACK * max(bounds_diagonal(box), np.finfo(np.float32).tiny)
+        low, high = box[0] - slack, box[1] + slack
         if len(receivers) == 0 or (np.all(receivers.bounds[0] >= low) and np.all(receivers.bounds[1] <= high)):
             return np.zeros(0, dtype=np.int64)
         p = receivers.positions
@@ -168,6 +203,17 @@ class Shadows:
                 "check_s": self._check_s, "device_bytes": int(own.pop("device_bytes", 0)),
                 "receivers": self._receivers, "outside_bounds": self._outside,
                 **{k: v for k, v in own.items() if k not in ("prepare_s", "classify_s", "receivers")}}
+
+
+NEAR = 1.0   # occluder box diagonals round the occluders' box that a bounded method's structure covers
+
+
+def near_box(bounds: np.ndarray, occluders: np.ndarray) -> np.ndarray:
+    """``bounds`` cut to :data:`NEAR` diagonals round the box ``occluders``; ``bounds`` itself when they
+    do not meet (every receiver is then answered by the second structure or as lit)."""
+    margin = NEAR * bounds_diagonal(occluders)
+    low, high = np.maximum(bounds[0], occluders[0] - margin), np.minimum(bounds[1], occluders[1] + margin)
+    return np.stack([low, high]) if np.all(low <= high) else bounds
 
 
 def prepare(scene_or_mesh, light, method: str = "exact", bounds=None, device=None, eps=None, **params) -> Shadows:
