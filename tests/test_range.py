@@ -168,13 +168,20 @@ def test_receivers_beyond_the_range_are_refused_by_index(scene):
         sc.shadow_mask(sc.Mesh(v, f), sc.PointLight((0.7, 4.0, 0.4)), far)
 
 
-def test_distant_light_prepared_for_bounds_refuses_points_beyond_them(scene):
-    """A light taken as directional for the prepared bounds is not parallel for receivers far beyond."""
+def test_distant_light_prepared_for_bounds_and_points_beyond_them(scene):
+    """A light taken as directional for the prepared bounds is not parallel for receivers far beyond:
+    a method with one structure refuses them by name, a bounded one (the shadow map) answers them from
+    a second structure (or as lit where their segment misses the occluders), right."""
     v, f, points, _ = scene
-    shadows = sc.prepare(sc.Mesh(v, f), sc.PointLight((0.0, 1e6, 0.0)), "shadow_map")
+    mesh, light = sc.Mesh(v, f), sc.PointLight((0.0, 1e6, 0.0))
+    far = np.array([[0.0, 0.0, 1e5], [0.0, -1e6, 0.0], [9.0, -2e5, 0.0]])   # below the sphere; beside the ground
+    shadows = sc.prepare(mesh, light, "exact")
     shadows.mask(points)
     with pytest.raises(ValueError, match="points: the light was used as a directional light"):
-        shadows.mask(np.array([[0.0, 0.0, 1e5]]))
+        shadows.mask(far)
+    truth = ref.shadow_mask(mesh.vertices, mesh.faces, light, far, None, 1e-4 * np.linalg.norm(np.ptp(mesh.bounds, 0)))
+    assert truth.tolist() == [False, True, False]
+    assert np.array_equal(sc.prepare(mesh, light, "shadow_map").mask(far), truth)
 
 
 # lights on, near and inside geometry ---------------------------------------------------------------------
@@ -254,13 +261,17 @@ PLACEMENTS = ("above", "far", "very far", "on a vertex", "near a face", "inside"
 @settings(max_examples=24, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(method=st.sampled_from(METHODS), occluder=st.sampled_from(("sphere", "box_minus_sphere")),
        log_scale=st.floats(-12.0, 15.0), offset=st.floats(-1e3, 1e3), placement=st.sampled_from(PLACEMENTS),
-       seed=st.integers(0, 2 ** 16), normals=st.booleans())
-def test_fuzz_right_or_a_clear_error(method, occluder, log_scale, offset, placement, seed, normals):
-    """Any scale 1e-12 .. 1e15, offset up to 1e3 scene sizes, light placement and method: the brute
-    force's answer to the method's band, or a ValueError naming the argument."""
+       seed=st.integers(0, 2 ** 16), normals=st.booleans(), far_receivers=st.booleans())
+def test_fuzz_right_or_a_clear_error(method, occluder, log_scale, offset, placement, seed, normals, far_receivers):
+    """Any scale 1e-12 .. 1e15, offset up to 1e3 scene sizes, light placement, method, and 5 receivers
+    moved 1e3 .. 1e8 away on the ground's plane or not: the brute force's answer to the method's band,
+    or a ValueError naming the argument."""
     rng = np.random.default_rng(seed)
     v, f = ground_scene(occluder)
     points = ground_points(rng, 200)
+    if far_receivers:
+        angle = rng.uniform(0, 2 * np.pi, 5)
+        points[:5] = np.c_[np.cos(angle), np.zeros(5), np.sin(angle)] * 10 ** rng.uniform(3, 8, (5, 1))
     triangle = sc.Mesh(v, f).triangles[rng.integers(len(f) - 2)]
     normal = np.cross(triangle[1] - triangle[0], triangle[2] - triangle[0])
     normal /= np.linalg.norm(normal)

@@ -28,7 +28,7 @@ enter; README "Working range"):
   move by at most size / reach of the scene's size;
 - point lights near the occluders: a method that needs clearance says so in its
   ``min_light_clearance`` (a fraction of the occluders' box diagonal); a light closer to a triangle is
-  refused (:meth:`Frame.check_clearance`).
+  refused (:func:`check_clearance`).
 """
 
 from __future__ import annotations

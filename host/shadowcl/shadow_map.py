@@ -167,7 +167,8 @@ class ShadowMapMethod(Method):
         fitted = lightspace.fit_views(light, receiver_bounds, origin, scale)
         _check_fits(self.device, resolution)
         corners = lightspace.box_corners(box - origin)
-        near = _cube_near(mesh, fitted.eye + origin, scale) if fitted.kind == "cube" else None
+        # the near plane floor scales with the occluders: far receivers must not clip a light's close surroundings
+        near = _cube_near(mesh, fitted.eye + origin, bounds_diagonal(mesh.bounds)) if fitted.kind == "cube" else None
         views = [_view(fitted, k, origin, corners, near, scale, resolution) for k in range(fitted.nviews)]
         to_light = fitted.eye if fitted.perspective else -np.asarray(light.direction, dtype=np.float64)
         records = np.stack([record for _, record in views])

@@ -50,8 +50,6 @@ class Shadows:
         self._device = get_device(device)
         self._mesh = mesh
         self._frame = frame_for(mesh, move=not cls.scene_input)
-        self._reach = union(mesh.bounds, self.bounds)   # the box a point light is judged distant for
-        self._fitted_box = near_box(self.bounds, mesh.bounds) if cls.bounded else self.bounds
         self._occluders = occluders(cls, scene_or_mesh) if cls.scene_input else self._frame.mesh(mesh)
         self._params = params
         self._instance = cls(self._device, **params)
@@ -67,6 +65,8 @@ class Shadows:
         check_clearance(self._mesh, self.light, self._instance.min_light_clearance, self.method)
         start = time.perf_counter()
         frame = self._frame
+        self._fitted_box, self._refuse_beyond = self._fit(self.light)
+        self._reach = union(self._mesh.bounds, self._fitted_box)   # the box the light is judged distant for
         self._frame_light = self._method_light(self._reach)
         self._instance.prepare(self._occluders, self._frame_light, frame.points(self._fitted_box), frame.length(self.eps))
         self._device.queue.finish()
@@ -89,11 +89,13 @@ class Shadows:
     def _query(self, kind: str, points, normals) -> np.ndarray:
         start = time.perf_counter()
         receivers = check_points(points, normals)
-        self._check_reach(receivers)
+        split = self._instance.bounded or self._refuse_beyond
+        if not split:
+            self._check_reach(receivers)
         outside = self._outside_bounds(receivers)
-        receivers = self._frame.receivers(receivers)
+        world, receivers = receivers, self._frame.receivers(receivers)
         checked = time.perf_counter()
-        if self._instance.bounded and len(outside):
+        if split and len(outside):
             inside = np.ones(len(receivers), dtype=bool)
             inside[outside] = False
             beyond = receivers.subset(outside)
@@ -103,9 +105,16 @@ class Shadows:
             reaching = self._reaching(beyond)
             answer[outside] = beyond.facing_away(self._frame_light) if kind == "classify" \
                 else (~beyond.facing_away(self._frame_light)).astype(np.float32)
+            if np.any(reaching) and self._refuse_beyond:
+                first = int(outside[np.argmax(reaching)])
+                raise ValueError(
+                    f"points: {int(reaching.sum())} receiver(s) (first at index {first}: {world.positions[first].tolist()}) "
+                    f"lie so far from the occluders that the point light, {self.method}'s arithmetic cannot resolve "
+                    f"from them, is not parallel for them; use a DirectionalLight or nearer receivers")
             if np.any(reaching):
                 candidates = beyond.subset(reaching)
-                answer[outside[reaching]] = getattr(self._fitted_to(candidates), kind)(candidates)
+                far = world.subset(outside[reaching]).bounds
+                answer[outside[reaching]] = getattr(self._fitted_to(candidates, far), kind)(candidates)
         else:
             answer = getattr(self._instance, kind)(receivers)
         answer[self._at_the_light(receivers)] = True if kind == "visibility" else False
@@ -121,6 +130,27 @@ class Shadows:
         framed = frame.view(view)
         return self._instance.classify_view(framed, dataclasses.replace(zbuffer, view=framed),
                                             dataclasses.replace(seen, points=frame.points(seen.points)))
+
+    def _fit(self, light) -> tuple[np.ndarray, bool]:
+        """The (world) box the structure is fitted to, and whether receivers beyond it that the occluders
+        may shadow must be refused: a point light beyond the method's ``point_light_reach`` from the
+        occluders, which it cannot resolve, is given to it as directional (:mod:`shadowcl.frame`) only
+        for receivers near enough for that to hold; beyond them, a segment missing the occluders' box
+        is lit, any other has no right answer from this method."""
+        occluders, limit = self._mesh.bounds, self._instance.point_light_reach
+        box = near_box(self.bounds, occluders) if self._instance.bounded else self.bounds
+        if not is_distant(light, occluders, limit) or is_distant(light, union(occluders, box), limit):
+            return box, False
+        centre = 0.5 * (occluders[0] + occluders[1])
+        half = np.linalg.norm(light.position - centre) / limit
+        while half > 0:
+            cut = np.stack([np.maximum(box[0], centre - half), np.minimum(box[1], centre + half)])
+            if not np.all(cut[0] <= cut[1]):
+                return occluders, True
+            if is_distant(light, union(occluders, cut), limit):
+                return cut, True
+            half *= 0.5
+        return occluders, True
 
     def _method_light(self, reach: np.ndarray):
         """The light as the method gets it (:meth:`shadowcl.frame.Frame.light`) for receivers in ``reach``."""
@@ -183,10 +213,11 @@ class Shadows:
         p = receivers.positions
         return np.flatnonzero(np.any((p < low) | (p > high), axis=1))
 
-    def _fitted_to(self, receivers: Points):
-        """A second instance of the method, prepared for the box of (framed) ``receivers`` (outside ``bounds``)."""
+    def _fitted_to(self, receivers: Points, world_box: np.ndarray):
+        """A second instance of the method, prepared for the box of (framed) ``receivers`` (outside the
+        fitted box; ``world_box`` theirs in the world, for the light's judgement)."""
         instance = type(self._instance)(self._device, **self._params)
-        instance.prepare(self._occluders, self._method_light(self._reach), receivers.bounds,
+        instance.prepare(self._occluders, self._method_light(union(self._mesh.bounds, world_box)), receivers.bounds,
                          self._frame.length(self.eps))
         return instance
 
