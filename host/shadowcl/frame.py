@@ -91,7 +91,7 @@ class Frame:
     def light(self, light, reach: np.ndarray, limit: float = DIRECTIONAL_DISTANCE):
         """``light`` as the methods get it, for receivers in the world box ``reach`` (which must hold the
         occluders): in the frame, or the directional light from ``reach``'s centre when it is a point
-        light beyond ``limit`` sizes of ``reach``."""
+        light beyond ``limit`` sizes of ``reach`` (at most :data:`DIRECTIONAL_DISTANCE`; ``limit=np.inf``: never)."""
         if isinstance(light, PointLight):
             if is_distant(light, reach, limit):
                 return DirectionalLight(0.5 * (reach[0] + reach[1]) - light.position)
@@ -157,7 +157,7 @@ def is_distant(light, reach: np.ndarray, limit: float = DIRECTIONAL_DISTANCE) ->
     offset = 0.5 * (reach[0] + reach[1]) - light.position
     largest = float(np.abs(offset).max())
     distance = largest * float(np.linalg.norm(offset / largest)) if largest > 0 else 0.0   # no overflow at 1e300
-    return distance > min(limit, DIRECTIONAL_DISTANCE) * bounds_diagonal(reach)
+    return distance > (limit if math.isinf(limit) else min(limit, DIRECTIONAL_DISTANCE)) * bounds_diagonal(reach)
 
 
 def union(a: np.ndarray, b: np.ndarray) -> np.ndarray:

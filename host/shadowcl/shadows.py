@@ -68,6 +68,7 @@ class Shadows:
         self._fitted_box, self._refuse_beyond = self._fit(self.light)
         self._reach = union(self._mesh.bounds, self._fitted_box)   # the box the light is judged distant for
         self._frame_light = self._method_light(self._reach)
+        self._true_light = frame.light(self.light, self._reach, limit=np.inf)   # never substituted
         self._instance.prepare(self._occluders, self._frame_light, frame.points(self._fitted_box), frame.length(self.eps))
         self._device.queue.finish()
         self._prepare_s = time.perf_counter() - start
@@ -103,8 +104,8 @@ class Shadows:
             answer[inside] = getattr(self._instance, kind)(receivers.subset(inside))
             # Beyond: a segment that misses the occluders' box is lit, unless its normal faces away.
             reaching = self._reaching(beyond)
-            answer[outside] = beyond.facing_away(self._frame_light) if kind == "classify" \
-                else (~beyond.facing_away(self._frame_light)).astype(np.float32)
+            answer[outside] = beyond.facing_away(self._true_light) if kind == "classify" \
+                else (~beyond.facing_away(self._true_light)).astype(np.float32)
             if np.any(reaching) and self._refuse_beyond:
                 first = int(outside[np.argmax(reaching)])
                 raise ValueError(
@@ -160,7 +161,7 @@ class Shadows:
         """Indices of the (framed) receivers whose tested segment is at most eps long and whose normal (if
         any) faces the light: lit by DESIGN.md's meaning (no hit lies beyond eps), whatever a method's
         projection makes of a point at its eye. Cheap when the light is outside the receivers' box."""
-        light, eps = self._frame_light, self._frame.length(self.eps)
+        light, eps = self._true_light, self._frame.length(self.eps)
         if not isinstance(light, PointLight) or len(receivers) == 0 or \
                 np.any(light.position < receivers.bounds[0] - 2 * eps) or np.any(light.position > receivers.bounds[1] + 2 * eps):
             return np.zeros(0, dtype=np.int64)
@@ -178,7 +179,7 @@ class Shadows:
         start = receivers.positions
         if receivers.normals is not None:
             start = start + self._frame.length(self.eps) * receivers.unit_normals()
-        light = self._frame_light
+        light = self._true_light
         if isinstance(light, PointLight):
             direction, end = light.position - start, 1.0
         else:
