@@ -233,7 +233,7 @@ def test_light_inside_a_closed_solid(scene, method):
     v, f, points, _ = scene
     light = sc.PointLight((0.1, 1.05, -0.2))
     if method == "angular":
-        with pytest.raises(ValueError, match="light: the point light .* is inside a closed solid"):
+        with pytest.raises(ValueError, match="light: the point light is inside a closed solid"):
             sc.shadow_mask(sc.Mesh(v, f), light, points, method=method)
     else:
         assert assert_right(method, sc.Mesh(v, f), light, points, what="inside the sphere").all()

@@ -837,7 +837,7 @@ def light_inside(mesh: Mesh, light, closed: np.ndarray, label: np.ndarray) -> No
             + np.einsum("ij,ij->i", b, d) * la
         winding = 2 * np.arctan2(det, den).sum() / (4 * np.pi)      # signed solid angles (Van Oosterom & Strackee)
         if abs(winding) > 0.5:
-            raise ValueError(f"light: the point light at {light.position.tolist()} is inside a closed solid "
+            raise ValueError(f"light: the point light is inside a closed solid "   # (its position here is the frame's)
                              f"({len(part)} faces); everything outside that solid is in its shadow, which "
                              "the angular table cannot represent (no face of it turns to the light): move the "
                              "light out or open the mesh")
