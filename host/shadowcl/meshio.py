@@ -70,7 +70,7 @@ def read_polygons(path, suffixes=MESH_SUFFIXES, what: str = "mesh file") -> Poly
     try:
         return _READERS[suffix](data)
     except _Malformed as error:
-        raise ValueError(f"{path}: {error}") from None
+        raise ValueError(f"path: {path} {error}") from None
 
 
 def _lines(data: bytes) -> list[str]:
