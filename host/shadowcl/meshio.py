@@ -70,7 +70,7 @@ def read_polygons(path, suffixes=MESH_SUFFIXES, what: str = "mesh file") -> Poly
     try:
         return _READERS[suffix](data)
     except _Malformed as error:
-        raise ValueError(f"path: {path} {error}") from None
+        raise ValueError(f"path: {path}: {error}") from None
 
 
 def _lines(data: bytes) -> list[str]:
@@ -89,8 +89,9 @@ def _numbers(tokens: list[str], kind, line: int, what: str) -> list:
 
 
 def _checked(vertices: np.ndarray, corners: np.ndarray, sizes: np.ndarray, vertex_lines=None,
-             polygon_lines=None) -> Polygons:
-    """The polygons after the checks every format shares; lines (when known) locate the first problem."""
+             polygon_lines=None, index_base: int = 0) -> Polygons:
+    """The polygons after the checks every format shares; lines (when known) locate the first problem,
+    and a bad index is reported as the file wrote it (counted from ``index_base``)."""
     def where(lines, index):
         return None if lines is None else lines[index]
 
@@ -110,8 +111,8 @@ def _checked(vertices: np.ndarray, corners: np.ndarray, sizes: np.ndarray, verte
     out = np.flatnonzero((corners < 0) | (corners >= len(vertices)))
     if len(out):
         face = int(np.searchsorted(np.cumsum(sizes), out[0], side="right"))
-        raise _Malformed(f"face {face} refers to vertex {corners[out[0]]}, but there are {len(vertices)} "
-                         f"vertices (numbered from 0 here)", where(polygon_lines, face))
+        raise _Malformed(f"face {face} refers to vertex {corners[out[0]] + index_base}, but the file has "
+                         f"{len(vertices)} vertices, numbered from {index_base}", where(polygon_lines, face))
     return Polygons(vertices, corners, sizes)
 
 
@@ -138,7 +139,8 @@ def _read_obj(data: bytes) -> Polygons:
             corners.extend(i - 1 if i > 0 else len(vertices) + i for i in indices)
             sizes.append(len(indices))
             polygon_lines.append(number)
-    return _checked(vertices, corners, sizes, vertex_lines, polygon_lines)
+    # positive indices may refer to vertices listed later: _checked tests them once all are read
+    return _checked(vertices, corners, sizes, vertex_lines, polygon_lines, index_base=1)
 
 
 # ---- OFF: "OFF", then "V F E", V vertex lines and F lines "n i1 .. in" (0-based); '#' comments ----
