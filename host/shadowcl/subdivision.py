@@ -42,6 +42,10 @@ from .device import get_device
 from .meshio import read_polygons
 from .geometry import Mesh
 
+#: Most cells (two triangles each) an explicit tessellation may have: 1.5 million cells (a cube cage at
+#: 512 segments) took 2.3 s and 730 MB here, so the limit keeps a tessellation within a few GB.
+MAX_TESSELLATION_CELLS = 1 << 21
+
 #: Stam levels stop once every point of the level-L control net is within this fraction of the net's
 #: size from the EV's limit position (float32 resolution), so using that position below 2^-L is exact
 #: to float32 precision.
@@ -885,6 +889,10 @@ class SubdivisionSurface:
             return None
         if segments % 2 and any(len(f) != 4 for f in self.faces):
             raise ValueError(f"segments: must be even on a control mesh with non-quad faces, got {segments}")
+        cells = sum(segments ** 2 if len(f) == 4 else len(f) * (segments // 2) ** 2 for f in self.faces)
+        if cells > MAX_TESSELLATION_CELLS:
+            raise ValueError(f"segments: {segments} per control edge make {cells:,} cells on this control mesh; "
+                             f"at most {MAX_TESSELLATION_CELLS:,} are allowed (tessellation memory and time)")
         return segments
 
     def _tessellation(self, segments: int):
