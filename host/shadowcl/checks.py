@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 
 
@@ -30,7 +32,7 @@ def finite_array(name: str, value, shape_tail: tuple[int, ...], dtype=np.float64
 def vector3(name: str, value, nonzero: bool = False) -> np.ndarray:
     """``value`` as a finite float64 3-vector (non-zero length if asked)."""
     try:
-        array = np.asarray(value, dtype=np.float64)
+        array = np.array(value, dtype=np.float64)   # a copy: stored vectors never share the caller's buffer
     except (TypeError, ValueError):
         raise TypeError(f"{name}: expected three numbers, got {value!r}") from None
     if array.shape != (3,):
@@ -70,8 +72,8 @@ def positive_float(name: str, value) -> float:
 
 
 def check_bounds(name: str, bounds) -> np.ndarray:
-    """A (2, 3) finite float64 box with low <= high."""
-    box = finite_array(name, bounds, (3,))
+    """A (2, 3) finite float64 box with low <= high (a copy: boxes are stored)."""
+    box = finite_array(name, bounds, (3,)).copy()
     if box.shape != (2, 3):
         raise ValueError(f"{name}: expected shape (2, 3) (low and high corners), got {box.shape}")
     if np.any(box[0] > box[1]):
@@ -85,8 +87,11 @@ def optional_int(name: str, value, minimum: int = 1, maximum: int | None = None)
 
 
 def choice(name: str, value, choices: tuple):
-    """``value`` if it is one of ``choices`` and of the same type (1.0 == 1 would otherwise pass)."""
-    if isinstance(value, bool) or type(value) not in {type(c) for c in choices} or value not in choices:
+    """``value`` if it is one of ``choices`` and of the same type (1.0 == 1 would otherwise pass, and
+    reach a kernel build as ``-DX=1.0``); a NumPy integer counts as the Python int it holds."""
+    if isinstance(value, np.integer):
+        value = int(value)
+    if isinstance(value, (bool, np.bool_)) or type(value) not in {type(c) for c in choices} or value not in choices:
         raise ValueError(f"{name}: expected one of {', '.join(map(repr, choices))}, got {value!r}")
     return value
 
@@ -96,3 +101,26 @@ def flag(name: str, value) -> bool:
     if not isinstance(value, (bool, np.bool_)):
         raise TypeError(f"{name}: expected a bool, got {type(value).__name__}")
     return bool(value)
+
+
+def available_host_bytes() -> int | None:
+    """Memory the host can still give this process (Linux's MemAvailable, else free physical pages;
+    None where neither is known)."""
+    try:
+        with open("/proc/meminfo") as meminfo:
+            for line in meminfo:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_AVPHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def check_memory(name: str, what: str, needed: int, available: int | None, where: str) -> None:
+    """ValueError naming ``name`` when ``what`` needs more than the ``available`` bytes of ``where``."""
+    if available is not None and needed > available:
+        raise ValueError(f"{name}: {what} needs about {needed / 2**30:.2f} GiB but {where} has "
+                         f"{available / 2**30:.2f} GiB available; make it smaller")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import ast
+import os
 import sys
 import time
 from pathlib import Path
@@ -34,8 +35,15 @@ def parse_param(text: str) -> tuple[str, object]:
         return name, value
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with usage errors as one line on stderr (exit code 2), like every other error."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="shadowcl", description="Hard shadows with OpenCL.")
+    parser = _Parser(prog="shadowcl", description="Hard shadows with OpenCL.")
     commands = parser.add_subparsers(dest="command", required=True)
 
     render = commands.add_parser("render", help="render a scene file to a PNG")
@@ -61,18 +69,22 @@ def run_render(args) -> int:
 
     started = time.perf_counter()
     scene = Scene.load(args.scene)
+    out = args.out or Path(f"shadowcl-{scene.name}-{args.method}.png")
+    _check_writable(out)
     load_time = time.perf_counter() - started
     width, height = args.size or (None, None)
     stages = ["raster", "receivers"] + ["prepare", "classify"] * len(scene.lights) + ["shading"]
-    with tqdm(total=len(stages), desc=f"render {scene.name}", unit="stage", leave=False) as bar:
+    # disable=None: no bar when stderr is not a terminal, so an error there is the only line
+    with tqdm(total=len(stages), desc=f"render {scene.name}", unit="stage", leave=False, disable=None) as bar:
         def progress(stage):
             bar.set_postfix_str(stage)
             bar.update(1)
 
         result = render_report(scene, args.method, width, height, get_device(args.device), progress=progress, **dict(args.param))
-    out = args.out or Path(f"shadowcl-{scene.name}-{args.method}.png")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    Image.fromarray(result.image).save(out)
+    try:
+        Image.fromarray(result.image).save(out)
+    except OSError as error:
+        raise ValueError(f"--out: cannot write {out}: {error.strerror or error}") from None
 
     height, width = result.image.shape[:2]
     shadowed = result.shadow.any(axis=0).mean() if result.shadow.size else 0.0
@@ -81,6 +93,24 @@ def run_render(args) -> int:
     print("times: " + ", ".join(f"{name} {seconds * 1e3:.1f} ms" for name, seconds in [("load", load_time), *result.timings.items()]))
     print(f"wrote {out.resolve()}")
     return 0
+
+
+def _check_writable(out: Path) -> None:
+    """Make ``out``'s folder and check a PNG can be written there, before any rendering is done."""
+    from PIL import Image
+
+    if out.suffix.lower() not in Image.registered_extensions():
+        raise ValueError(f"--out: {out.suffix or 'no suffix'!r} is not an image format Pillow writes (use .png)")
+    if out.is_dir():
+        raise ValueError(f"--out: {out} is a folder")
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError):
+        raise ValueError(f"--out: cannot make the folder {out.parent}: a file is in the way") from None
+    except OSError as error:
+        raise ValueError(f"--out: cannot make the folder {out.parent}: {error.strerror or error}") from None
+    if not os.access(out.parent, os.W_OK) or (out.exists() and not os.access(out, os.W_OK)):
+        raise ValueError(f"--out: cannot write {out}: permission denied")
 
 
 def run_devices() -> int:
@@ -109,7 +139,7 @@ def main(argv=None) -> int:
         if args.command == "devices":
             return run_devices()
         return run_methods()
-    except (ValueError, TypeError, FileNotFoundError, RuntimeError) as error:
+    except (ValueError, TypeError, OSError, RuntimeError, MemoryError) as error:
         print(f"shadowcl: error: {error}", file=sys.stderr)
         return 2
 

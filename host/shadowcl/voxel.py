@@ -92,6 +92,15 @@ def scene_patches(device, scene_or_surface):
     return vz.patch_table_of(device, scene_or_surface)
 
 
+def control_points(scene_or_surface) -> "np.ndarray | None":
+    """The control-mesh vertices of what :func:`scene_patches` voxelizes (None for a bare patch table)."""
+    surfaces = getattr(scene_or_surface, "surfaces", None)
+    if surfaces and hasattr(scene_or_surface, "objects"):
+        return np.vstack([surface.vertices for _, surface in surfaces])
+    vertices = getattr(scene_or_surface, "vertices", None)
+    return vertices if isinstance(vertices, np.ndarray) else None
+
+
 class VoxelMethod(Method):
     """Lai & Cheng's voxel-based shadows (module docstring). After :meth:`prepare`, :attr:`stats` holds
     the voxelization (leaves, levels, subpatches, bytes), list entries and each stage's time in seconds
@@ -153,6 +162,7 @@ class VoxelMethod(Method):
         frame_bytes = 4 * vz.frame_word_count(resolution)
         frame_buffer = self.frame_buffer if self.frame_buffer is not None else frame_bytes <= self.device.max_alloc_bytes
         self.table, self.light, self.eps = table, light, float(eps)
+        self._control_points = control_points(scene_or_surface)
         self.light_vec = (np.asarray(light.position if isinstance(light, PointLight) else light.direction,
                                      dtype=np.float32))
         self.resolution_used, self.frame_buffer_used = resolution, bool(frame_buffer)
@@ -176,7 +186,7 @@ class VoxelMethod(Method):
         dev, queue = self.device, self.device.queue
         t0 = time.perf_counter()
         vox = vz.voxelize(dev, self.table, self.resolution_used, self.connectivity, frame_buffer=self.frame_buffer_used,
-                          grid_bounds=self.grid_bounds)
+                          grid_bounds=self.grid_bounds, control_points=self._control_points)
         t1 = time.perf_counter()
         n = vox.nleaves
         nsamples = 4 * n
