@@ -324,7 +324,7 @@ BAD_FILES = [
     (OBJECT + "box = { sise = 1 }\n", ValueError, r"objects\[0\]\.box\.sise: unknown key; allowed here: size, center"),
     (OBJECT + 'sphere = { radius = "big" }\n', TypeError, r"objects\[0\]\.sphere\.radius: expected a number, got a string"),
     (OBJECT + "sphere = { radius = -1 }\n", ValueError, r"objects\[0\]\.sphere\.radius: must be positive, got -1"),
-    (OBJECT + "sphere = { segments = 2 }\n", ValueError, r"objects\[0\]\.sphere\.segments: must be at least 3, got 2"),
+    (OBJECT + "sphere = { segments = 2 }\n", ValueError, r"objects\[0\]\.sphere\.segments: must be between 3 and 2048, got 2"),
     (OBJECT + "sphere = { segments = 8.0 }\n", TypeError,
      r"objects\[0\]\.sphere\.segments: expected an integer, got a float"),
     (OBJECT + 'box = { center = "yes" }\n', TypeError, r"objects\[0\]\.box\.center: expected true or false, got a string"),

@@ -279,7 +279,7 @@ def _read_ply(data: bytes) -> Polygons:
     if not lists:
         raise _Malformed(f"the face element needs an integer list property {' or '.join(FACE_LISTS)}", face.line)
     read = _ply_ascii if order == "ascii" else _ply_binary
-    rows = read(data, body_start, elements, order, len(header))
+    rows, row_lines = read(data, body_start, elements, order, len(header))
     xyz = np.stack([rows["vertex"][axis] for axis in "xyz"], axis=1)
     polygons = rows["face"][lists[0]]
     if isinstance(polygons, np.ndarray):        # every face has the same number of corners
@@ -287,18 +287,20 @@ def _read_ply(data: bytes) -> Polygons:
     else:
         sizes = np.array([len(p) for p in polygons], dtype=np.int64)
         corners = np.concatenate(polygons) if polygons else np.zeros(0, np.int64)
-    return _checked(xyz, corners.astype(np.int64), sizes)
+    return _checked(xyz, corners.astype(np.int64), sizes, row_lines.get("vertex"), row_lines.get("face"))
 
 
-def _ply_ascii(data: bytes, start: int, elements: list, order: str, header_lines: int) -> dict:
+def _ply_ascii(data: bytes, start: int, elements: list, order: str, header_lines: int) -> tuple[dict, dict]:
+    """({element: {property: values}}, {element: line number of each row})."""
     lines = [(number, line.split()) for number, line in enumerate(_lines(data[start:]), header_lines + 1)]
     lines = [(number, tokens) for number, tokens in lines if tokens]
     needed = sum(element.count for element in elements)
     if needed > len(lines):
         raise _Malformed(f"the header announces {needed} rows but the file has {len(lines)} more lines")
-    rows, at = {}, 0
+    rows, row_lines, at = {}, {}, 0
     for element in elements:
         values = {name: [] for name, _, _ in element.properties}
+        row_lines[element.name] = [number for number, _ in lines[at:at + element.count]]
         for number, tokens in lines[at:at + element.count]:
             position = 0
             for name, kind, length in element.properties:
@@ -319,10 +321,11 @@ def _ply_ascii(data: bytes, start: int, elements: list, order: str, header_lines
         at += element.count
         rows[element.name] = {name: (np.array(v, dtype=np.float64) if not v or np.isscalar(v[0]) else v)
                               for name, v in values.items()}
-    return rows
+    return rows, row_lines
 
 
-def _ply_binary(data: bytes, start: int, elements: list, order: str, header_lines: int) -> dict:
+def _ply_binary(data: bytes, start: int, elements: list, order: str, header_lines: int) -> tuple[dict, dict]:
+    """({element: {property: values}}, {}): binary rows have no lines."""
     rows, at = {}, start
     for element in elements:
         scalars = [(name, order + kind) for name, kind, length in element.properties if length is None]
@@ -337,7 +340,7 @@ def _ply_binary(data: bytes, start: int, elements: list, order: str, header_line
             at += table.nbytes
         else:
             rows[element.name], at = _ply_binary_rows(data, at, element, order)
-    return rows
+    return rows, {}
 
 
 def _ply_binary_rows(data: bytes, at: int, element: _Element, order: str) -> tuple[dict, int]:
