@@ -6,6 +6,7 @@ mesh they were written from, and a mutation whose effect is known (a bad number,
 refused at its line. Examples are derandomized and counted, so the run is bounded (about 15 s here).
 """
 
+import copy
 import json
 import math
 import struct
@@ -200,40 +201,66 @@ def test_huge_header_counts_are_refused_before_allocating(tmp_path, mesh, fmt, c
     assert_named(error.value, path)
 
 
-# ---- scene files ----
+# ---- scene files: a valid scene, then at most one mutation at a random key path ----
 
-HOSTILE_NUMBERS = [0, -1, 1, 2, 0.5, 3, 7, 1e-300, 1e39, 1e300, math.nan, math.inf, -math.inf, 2**31, 2**63 - 1,
-                   -2**63, 10**9, 2049, 524290, 1.5]
-HOSTILE_VALUES = st.one_of(st.sampled_from(HOSTILE_NUMBERS),
-                           st.sampled_from(["x", "", True, [], [1, 2], [1, 2, 3], [0.5, 0.5, 0.5], [[1]], {"a": 1}]))
-TRANSFORM = st.dictionaries(st.sampled_from(["scale", "rotate", "translate"]), HOSTILE_VALUES, max_size=2)
-
-
-def params(keys):
-    return st.dictionaries(st.sampled_from(keys + ["bogus"]), HOSTILE_VALUES, max_size=3)
-
-
+HOSTILE_VALUES = st.sampled_from([0, -1, 2, 0.5, 1e-300, 1e39, 1e300, math.nan, math.inf, -math.inf, 2**31,
+                                  2**63 - 1, -2**63, 10**9, 2049, 524290, 1.5, "x", "", True, [], [1, 2],
+                                  [0, 0, 0], [1e39, 0, 0], [[1]], {"a": 1}])
+VECTOR = st.sampled_from([[0, 1, 0], [5, -2, 1], [0.3, 0.2, -0.1]])
+TRANSFORM = st.fixed_dictionaries({}, optional={"scale": st.sampled_from([2, 0.5, [1, 2, 1], -1]),
+                                                "rotate": st.sampled_from([[0, 90, 0], [10, 20, 30]]),
+                                                "translate": VECTOR})
 PRIMITIVE = st.one_of(
-    st.fixed_dictionaries({"sphere": params(["radius", "segments"])}),
-    st.fixed_dictionaries({"box": params(["size", "center"])}),
-    st.fixed_dictionaries({"cylinder": params(["height", "radius", "radius_top", "segments", "center"])}),
-    st.fixed_dictionaries({"triangles": st.fixed_dictionaries(
-        {"vertices": st.sampled_from([[[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 0]], [[math.nan, 0, 0]] * 3, []]),
-         "faces": st.sampled_from([[[0, 1, 2]], [[0, 1, 3]], [[0, 1]], [[0.0, 1, 2]], []])})}),
+    st.builds(dict, sphere=st.fixed_dictionaries({}, optional={"radius": st.sampled_from([0.5, 1, 2]),
+                                                                "segments": st.sampled_from([4, 8, 12])})),
+    st.builds(dict, box=st.fixed_dictionaries({}, optional={"size": st.sampled_from([1, [1, 2, 0.5]]),
+                                                             "center": st.booleans()})),
+    st.builds(dict, cylinder=st.fixed_dictionaries({}, optional={"height": st.sampled_from([1, 2]),
+                                                                  "radius_top": st.sampled_from([0, 0.5]),
+                                                                  "segments": st.sampled_from([3, 8])})),
+    st.just({"triangles": {"vertices": [[0, 0, 0], [1, 0, 0], [0, 1, 0]], "faces": [[0, 1, 2]]}}),
 )
+SOLID = PRIMITIVE.filter(lambda shape: "triangles" not in shape)
+CSG = st.recursive(SOLID, lambda children: st.builds(
+    lambda op, items, transform: {op: items, **transform}, st.sampled_from(["union", "difference"]),
+    st.lists(children, min_size=1, max_size=2), TRANSFORM), max_leaves=4)
+SHAPE = st.builds(lambda shape, transform: {**shape, **transform}, st.one_of(PRIMITIVE, CSG), TRANSFORM)
+LIGHT = st.one_of(st.builds(dict, type=st.just("point"), position=st.just([0, 8, 0])),
+                  st.builds(dict, type=st.just("directional"), direction=st.just([0.2, -1, 0.1])))
+SCENE = st.fixed_dictionaries({"lights": st.lists(LIGHT, min_size=1, max_size=2),
+                               "objects": st.lists(SHAPE, min_size=1, max_size=3)},
+                              optional={"name": st.just("fuzz"), "render": st.just({"width": 64, "height": 48}),
+                                        "camera": st.just({"position": [6, 4, 8], "target": [0, 0, 0]})})
 
 
-def with_transform(shape):
-    return st.builds(lambda s, t: {**s, **t}, shape, TRANSFORM)
+def key_paths(value, path=()):
+    """Every path to a value inside nested dicts and lists."""
+    items = value.items() if isinstance(value, dict) else enumerate(value) if isinstance(value, list) else ()
+    for key, item in items:
+        yield path + (key,)
+        yield from key_paths(item, path + (key,))
 
 
-SHAPES = st.recursive(with_transform(PRIMITIVE), lambda children: with_transform(st.builds(
-    lambda op, items: {op: items}, st.sampled_from(["union", "difference", "intersection"]),
-    st.lists(children, max_size=3))), max_leaves=6)
-LIGHTS = st.lists(st.one_of(
-    st.fixed_dictionaries({"type": st.just("point"), "position": HOSTILE_VALUES}),
-    st.fixed_dictionaries({"type": st.sampled_from(["directional", "spot", 3]), "direction": HOSTILE_VALUES})),
-    max_size=2)
+@st.composite
+def mutated_scenes(draw):
+    """(scene dict, whether it was mutated): one value replaced, one key removed or one unknown key added."""
+    scene = copy.deepcopy(draw(SCENE))   # st.just values are shared between examples
+    kind = draw(st.sampled_from(["none", "replace", "replace", "delete", "add"]))
+    if kind == "none":
+        return scene, False
+    path = draw(st.sampled_from(list(key_paths(scene))))
+    parent = scene
+    for key in path[:-1]:
+        parent = parent[key]
+    if kind == "replace":
+        parent[path[-1]] = draw(HOSTILE_VALUES)
+    elif kind == "delete":
+        del parent[path[-1]]
+    else:
+        target = parent if isinstance(parent, dict) else parent[path[-1]]
+        if isinstance(target, dict):
+            target["bogus"] = 1
+    return scene, True
 
 
 def toml_value(value) -> str:
@@ -252,34 +279,33 @@ def toml_value(value) -> str:
 
 
 @FUZZ
-@given(shapes=st.lists(SHAPES, max_size=3), lights=LIGHTS,
-       extra=st.dictionaries(st.sampled_from(["name", "render", "camera", "bogus"]), HOSTILE_VALUES, max_size=2))
-def test_mutated_scene_files_load_or_name_the_file(tmp_path, shapes, lights, extra):
-    text = "".join(f"{json.dumps(key)} = {toml_value(value)}\n" for key, value in extra.items())
-    text += "".join("[[lights]]\n" + "".join(f"{key} = {toml_value(v)}\n" for key, v in light.items()) for light in lights)
-    text += "".join(f"[[objects]]\n" + "".join(f"{key} = {toml_value(v)}\n" for key, v in shape.items()) for shape in shapes)
+@given(case=mutated_scenes())
+def test_mutated_scene_files_load_or_name_the_file(tmp_path, case):
+    scene, mutated = case
     path = tmp_path / "fuzz.toml"
-    path.write_text(text)
+    path.write_text("".join(f"{json.dumps(key)} = {toml_value(value)}\n" for key, value in scene.items()))
     try:
-        scene = sc.Scene.load(path)
+        loaded = sc.Scene.load(path)
     except (ValueError, TypeError, FileNotFoundError) as error:
         assert str(error).startswith(f"{path}: "), error
+        assert mutated or "is empty" in str(error), error   # a difference may remove everything
         return
-    assert np.all(np.isfinite(scene.mesh.vertices)) and np.all(np.isfinite(scene.bounds))
+    assert np.all(np.isfinite(loaded.mesh.vertices)) and np.all(np.isfinite(loaded.bounds))
+    if not mutated:
+        assert len(loaded.objects) == len(scene["objects"]) and len(loaded.lights) == len(scene["lights"])
 
 
-@FUZZ
-@given(depth=st.sampled_from([1, 10, 63, 64, 65, 100, 300, 1000]), inline=st.booleans(),
-       operation=st.sampled_from(["union", "difference", "intersection"]))
-def test_nesting_is_bounded_with_the_key_path(tmp_path, depth, inline, operation):
+@pytest.mark.parametrize("depth, inline", [(64, False), (65, False), (1000, False), (64, True), (65, True),
+                                           (1000, True)])
+def test_nesting_is_bounded_with_the_key_path(tmp_path, depth, inline):
     light = '[[lights]]\ntype = "point"\nposition = [0, 5, 0]\n'
     if inline:
         shape = "{ sphere = { segments = 4 } }"
         for _ in range(depth - 1):
-            shape = f"{{ {operation} = [{shape}] }}"
-        text = light + f"[[objects]]\n{operation} = [{shape}]\n"
+            shape = f"{{ union = [{shape}] }}"
+        text = light + f"[[objects]]\nunion = [{shape}]\n"
     else:
-        keys = ["objects"] + [operation] * depth
+        keys = ["objects"] + ["union"] * depth
         text = light + "".join(f"[[{'.'.join(keys[:i + 1])}]]\n" for i in range(depth + 1)) + "sphere = { segments = 4 }\n"
     path = tmp_path / "nested.toml"
     path.write_text(text)
@@ -290,4 +316,4 @@ def test_nesting_is_bounded_with_the_key_path(tmp_path, depth, inline, operation
         sc.Scene.load(path)
     message = str(error.value)
     assert message.startswith(f"{path}: ")
-    assert "nested" in message and ("objects[0]" in message or "TOML parser" in message)
+    assert ("objects[0]" in message and "CSG nested more than 64 deep" in message) or "too deep for the TOML parser" in message
