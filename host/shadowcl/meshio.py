@@ -241,7 +241,7 @@ class _Element:
 def _read_ply(data: bytes) -> Polygons:
     end = data.find(b"end_header")
     if not data.startswith(b"ply") or end < 0:
-        raise _Malformed("not a PLY file (expected 'ply' first and an 'end_header' line)", 1)
+        raise _Malformed("not a PLY file (expected 'ply' first and an 'end_header' line)")
     body_start = data.find(b"\n", end) + 1 or len(data)
     header = data[:end].decode("latin-1").split("\n")
     order, elements = None, []
