@@ -22,7 +22,7 @@ from .geometry import bounds_diagonal
 from .lights import check_light, same_light
 from .methods import method_class, resolve_eps, with_receiver_count
 from .points import check_points
-from .scene import Scene
+from .scene import MAX_RENDER_SIDE, Scene
 from .shadows import Shadows
 from .views import Camera
 
@@ -30,7 +30,7 @@ AMBIENT = 0.18
 BACKGROUND_TOP = np.array([0.60, 0.70, 0.85])
 BACKGROUND_BOTTOM = np.array([0.92, 0.93, 0.95])
 DEFAULT_SIZE = (960, 540)
-MAX_SIDE = 16384
+MAX_SIDE = MAX_RENDER_SIDE
 # Peak memory a frame takes per pixel, checked before anything is allocated. Host: the peak RSS slope
 # between 512^2 and 1536^2 frames of the default scene was 235-262 bytes a pixel (exact, shadow_map,
 # shadow_volume, angular; PoCL's buffers included, they live in host memory) plus ~5.5 per extra light.

@@ -93,6 +93,8 @@ DEFAULT_SEGMENTS = 32
 MAX_PRIMITIVE_TRIANGLES = 1 << 21
 MAX_SPHERE_SEGMENTS = int(np.sqrt(2 * MAX_PRIMITIVE_TRIANGLES))
 MAX_CYLINDER_SEGMENTS = (MAX_PRIMITIVE_TRIANGLES + 4) // 4
+# Largest image side a scene may ask renderers for (render.MAX_SIDE is this).
+MAX_RENDER_SIDE = 16384
 # Deepest CSG nesting read from a file: far beyond any real scene, well within Python's recursion limit.
 MAX_CSG_DEPTH = 64
 DEFAULT_FOV = 45.0
@@ -265,7 +267,8 @@ def _rgb(name: str, value) -> np.ndarray:
 def _checked_size(size) -> tuple[int, int]:
     if not (isinstance(size, (list, tuple)) and len(size) == 2):
         raise TypeError(f"render_size: expected (width, height), got {size!r}")
-    return positive_int("render_size[0]", size[0]), positive_int("render_size[1]", size[1])
+    return (positive_int("render_size[0]", size[0], maximum=MAX_RENDER_SIDE),
+            positive_int("render_size[1]", size[1], maximum=MAX_RENDER_SIDE))
 
 
 # ---- reading scene files ----
@@ -466,7 +469,7 @@ def _read_light(table: _Table):
 
 def _read_render_size(table: _Table) -> tuple[int, int]:
     table.allow_only(("width", "height"))
-    return table.integer("width"), table.integer("height")
+    return table.integer("width", maximum=MAX_RENDER_SIDE), table.integer("height", maximum=MAX_RENDER_SIDE)
 
 
 def _read_object(table: _Table, base_dir: Path) -> tuple[str, "Mesh | tuple", np.ndarray | None]:
