@@ -75,6 +75,23 @@ def test_render_rejects_bad_sizes(device):
         sc.render(scene, width=10, height=2.5, device=device)
 
 
+def test_render_sizes_are_checked_against_memory_before_allocating(device, monkeypatch):
+    """A frame that does not fit the host's (or the device's) free memory is refused with the amount
+    needed; the memory figures are set here so the test does not depend on the machine."""
+    import importlib
+
+    render_module = importlib.import_module("shadowcl.render")   # sc.render is the function
+    scene = sc.Scene.load(SCENES / "default.toml")
+    monkeypatch.setattr(render_module, "available_host_bytes", lambda: 1 << 30)
+    with pytest.raises(ValueError, match=r"width, height: a 4096 x 4096 frame with 1 light\(s\) needs about 4\.81 GiB "
+                                         r"but the host has 1\.00 GiB available"):
+        sc.render(scene, width=4096, height=4096, device=device)
+    assert sc.render(scene, width=64, height=32, device=device).shape == (32, 64, 3)   # a size that fits works
+    monkeypatch.setattr(render_module, "DEVICE_BYTES_PER_PIXEL", 1 << 40)
+    with pytest.raises(ValueError, match=r"width, height: .* but device .* has"):
+        sc.render(scene, width=64, height=32, device=device)
+
+
 def test_far_offset_scene_renders_like_the_default(device):
     # The same scene 1e5 away from the origin: float32 world coordinates there are 0.008 apart, so
     # vertices move by up to 0.004 (1e-4 of the scene) and only pixels along shadow edges may change.
