@@ -127,7 +127,13 @@ BAD_FILES = [
      r"line 3: element 'vertex': the header announces 4000000000 rows, at least 48000000000 bytes, but 64 remain"),
     ("bad.ply", b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nelement face 0\n"
                 b"property list uchar int vertex_indices\nend_header\n",
-     r"line 3: the vertex element needs properties x, y and z"),
+     r"line 3: the vertex element needs number properties x, y and z"),
+    ("bad.ply", b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+                b"property float z\nelement face 1\nproperty list uint int vertex_indices\nend_header\n" + bytes(36)
+                + (4000000000).to_bytes(4, "little") + bytes(12), r"element 'face' row 0: the file ends inside it"),
+    ("bad.ply", b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+                b"property float z\nelement face 1\nproperty list char int vertex_indices\nend_header\n" + bytes(36)
+                + b"\xff" + bytes(12), r"element 'face' row 0: list 'vertex_indices' has negative length -1"),
     ("bad.off", b"OFF\n1000000000 1 0\n0 0 0\n", r"line 1: the header announces 1000000000 vertices and 1 faces"),
     ("bad.off", b"OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n4 0 1 2\n", r"line 6: expected a face 'n i1 .. in', got '4 0 1 2'"),
     ("bad.off", b"COFF? 3 1\n", r"line 1: expected the header 'OFF'"),

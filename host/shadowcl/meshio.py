@@ -131,7 +131,9 @@ def _read_obj(data: bytes) -> Polygons:
             vertices.append(_numbers(parts[1:4], float, number, "three numbers after 'v'"))
             vertex_lines.append(number)
         elif parts[0] == "f":
-            indices = _numbers([token.split("/")[0] for token in parts[1:]], int, number, "vertex indices after 'f'")
+            # "f v", "f v/vt", "f v//vn", "f v/vt/vn": the vertex index comes first
+            indices = _numbers([token.split("/")[0] for token in parts[1:]], int, number,
+                               f"vertex indices after 'f' in {line.strip()!r}")
             for index in indices:
                 if index == 0 or -index > len(vertices):
                     raise _Malformed(f"vertex index {index} is not valid here (OBJ counts from 1; negative "
@@ -271,9 +273,9 @@ def _read_ply(data: bytes) -> Polygons:
     vertex, face = by_name.get("vertex"), by_name.get("face")
     if vertex is None or face is None:
         raise _Malformed("expected a 'vertex' and a 'face' element")
-    names = [name for name, _, _ in vertex.properties]
+    names = [name for name, _, length in vertex.properties if length is None]
     if not all(axis in names for axis in "xyz"):
-        raise _Malformed(f"the vertex element needs properties x, y and z, has {names}", vertex.line)
+        raise _Malformed(f"the vertex element needs number properties x, y and z, has {names}", vertex.line)
     lists = [name for name, kind, length in face.properties
              if length is not None and name in FACE_LISTS and not kind.startswith("f")]
     if not lists:
@@ -360,7 +362,7 @@ def _ply_binary_rows(data: bytes, at: int, element: _Element, order: str) -> tup
             size = int(np.frombuffer(data, order + length, 1, offset)[0]) if offset + np.dtype(length).itemsize <= len(data) else -1
             lengths.append(size)
             offset += np.dtype(length).itemsize + max(size, 0) * np.dtype(kind).itemsize
-    if element.count and min(lengths) >= 0:
+    if element.count and min(lengths) >= 0 and at + element.count * (offset - at) <= len(data):
         dtype = fixed_dtype(lengths)
         if at + element.count * dtype.itemsize <= len(data):
             table = np.frombuffer(data, dtype=dtype, count=element.count, offset=at)
@@ -379,7 +381,9 @@ def _ply_binary_rows(data: bytes, at: int, element: _Element, order: str) -> tup
                 size = int(np.frombuffer(data, order + length, 1, at)[0])
                 at += np.dtype(length).itemsize
             nbytes = size * np.dtype(kind).itemsize
-            if size < 0 or at + nbytes > len(data):
+            if size < 0:
+                raise _Malformed(f"element {element.name!r} row {row}: list {name!r} has negative length {size}")
+            if at + nbytes > len(data):
                 raise _Malformed(f"element {element.name!r} row {row}: the file ends inside it")
             items = np.frombuffer(data, order + kind, size, at)
             values[name].append(float(items[0]) if length is None else items)
