@@ -47,6 +47,11 @@ BAD_INPUTS = [
     (lambda: sc.Mesh.load("model.xyz"), ValueError, r"path: unsupported mesh format '.xyz'"),
     (lambda: sc.Mesh.load("/no/such/model.obj"), FileNotFoundError, r"path: no mesh file at /no/such/model.obj"),
     (lambda: sc.Mesh.load(None), TypeError, r"path: expected a file path, got NoneType"),
+    (lambda: sc.PointLight((10**400, 0, 0)), ValueError, r"position: .* is beyond the floating-point range"),
+    (lambda: shadow_mask(MESH, LIGHT, np.zeros((2, 3)), method="shadow_volume", max_error=10**400), ValueError,
+     r"max_error: 1000.* is beyond the floating-point range"),
+    (lambda: shadow_mask(MESH, LIGHT, np.zeros((2, 3)), method="voxel", frame_buffer=1.0), TypeError,
+     r"frame_buffer: expected a bool, got float"),
 ]
 
 

@@ -33,6 +33,8 @@ def vector3(name: str, value, nonzero: bool = False) -> np.ndarray:
     """``value`` as a finite float64 3-vector (non-zero length if asked)."""
     try:
         array = np.array(value, dtype=np.float64)   # a copy: stored vectors never share the caller's buffer
+    except OverflowError:
+        raise ValueError(f"{name}: {value!r} is beyond the floating-point range") from None
     except (TypeError, ValueError):
         raise TypeError(f"{name}: expected three numbers, got {value!r}") from None
     if array.shape != (3,):
@@ -57,15 +59,24 @@ def non_negative_float(name: str, value) -> float:
     """``value`` as a finite float >= 0 (numbers only: strings are refused, not parsed)."""
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise TypeError(f"{name}: expected a number, got {type(value).__name__}")
-    if not (np.isfinite(value) and value >= 0):
+    number = _as_float(name, value)
+    if not (np.isfinite(number) and number >= 0):
         raise ValueError(f"{name}: must be a finite non-negative number, got {value!r}")
-    return float(value)
+    return number
+
+
+def _as_float(name: str, value) -> float:
+    """A number as a float; an integer beyond the float range is a ValueError, not an OverflowError."""
+    try:
+        return float(value)
+    except OverflowError:
+        raise ValueError(f"{name}: {value} is beyond the floating-point range") from None
 
 
 def positive_float(name: str, value) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise TypeError(f"{name}: expected a number, got {value!r}")
-    number = float(value)
+    number = _as_float(name, value)
     if not (np.isfinite(number) and number > 0):
         raise ValueError(f"{name}: must be a finite positive number, got {value!r}")
     return number

@@ -62,7 +62,7 @@ import pyopencl as cl
 
 from . import lightspace
 from . import voxelize as vz
-from .checks import check_bounds, choice, optional_int
+from .checks import check_bounds, choice, flag, optional_int
 from .lights import PointLight, check_light
 from .methods import Method
 from .points import check_points
@@ -131,9 +131,7 @@ class VoxelMethod(Method):
         self.resolution = optional_int("resolution", p["resolution"], 1, vz.MAX_RESOLUTION)
         self.determination = choice("determination", p["determination"], DETERMINATIONS)
         self.connectivity = choice("connectivity", p["connectivity"], vz.CONNECTIVITIES)
-        if p["frame_buffer"] not in (None, True, False):
-            raise TypeError(f"frame_buffer: expected None, True or False, got {p['frame_buffer']!r}")
-        self.frame_buffer = p["frame_buffer"]
+        self.frame_buffer = None if p["frame_buffer"] is None else flag("frame_buffer", p["frame_buffer"])
         self.grid_bounds = None if p["grid_bounds"] is None else check_bounds("grid_bounds", p["grid_bounds"])
         self._builder = lightspace.ListBuilder(device, corners=4)
         self._prepared = False
