@@ -9,6 +9,7 @@ image, Williams' post-filter of the shadow image.
 
 from __future__ import annotations
 
+import copy
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -128,7 +129,7 @@ class Renderer:
         self.device = get_device(device)
         check_frame_memory(self.width, self.height, len(scene.lights), self.device)
         self.method_class(self.device, **params)          # bad parameters raise here, not at the first frame
-        self._params = params
+        self._params = copy.deepcopy(params)   # kept for later slots: never the caller's arrays
         self._progress = progress
         self._slots: list[Shadows] = []
         self._camera = None                               # (view, zbuffer, seen, receiver points) of the last camera
