@@ -295,7 +295,7 @@ def test_mutated_scene_files_load_or_name_the_file(tmp_path, case):
         assert len(loaded.objects) == len(scene["objects"]) and len(loaded.lights) == len(scene["lights"])
 
 
-@pytest.mark.parametrize("depth, inline", [(64, False), (65, False), (1000, False), (64, True), (65, True),
+@pytest.mark.parametrize("depth, inline", [(64, False), (65, False), (300, False), (64, True), (65, True),
                                            (1000, True)])
 def test_nesting_is_bounded_with_the_key_path(tmp_path, depth, inline):
     light = '[[lights]]\ntype = "point"\nposition = [0, 5, 0]\n'

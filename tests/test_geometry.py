@@ -224,6 +224,6 @@ def test_prepared_method_parameters_are_copies():
     cube = np.array([[x, y, z] for x in (0, 1) for y in (1, 2) for z in (0, 1)], dtype=float)
     faces = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
     grid_bounds = np.array([[-1.0, 0, -1], [2, 3, 2]])
-    shadows = sc.prepare(SubdivisionSurface(cube, faces), LIGHT, method="voxel", grid_bounds=grid_bounds)
+    shadows = sc.prepare(SubdivisionSurface(cube, faces), LIGHT, method="voxel", grid_bounds=grid_bounds, resolution=16)
     grid_bounds[:] = 0
     np.testing.assert_array_equal(shadows.params["grid_bounds"], [[-1, 0, -1], [2, 3, 2]])
