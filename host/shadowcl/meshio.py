@@ -173,12 +173,14 @@ def _read_off(data: bytes) -> Polygons:
         vertex_lines.append(number)
     corners, sizes, polygon_lines = [], [], []
     for number, tokens in rest[nv:nv + nf]:
-        values = _numbers(tokens, int, number, "integers 'n i1 .. in'") if tokens[0].isdigit() else None
-        if values is None or len(values) < values[0] + 1:
+        size = int(tokens[0]) if tokens[0].isdigit() else -1
+        if size < 0 or len(tokens) < size + 1:
             raise _Malformed(f"expected a face 'n i1 .. in', got {' '.join(tokens)!r}", number)
-        corners.extend(values[1:values[0] + 1])
-        sizes.append(values[0])
+        corners.extend(_numbers(tokens[1:size + 1], int, number, "integer vertex indices"))  # a colour may follow
+        sizes.append(size)
         polygon_lines.append(number)
+    if len(rest) > nv + nf:   # a count too small would otherwise drop the rest silently
+        raise _Malformed(f"more lines than the header's {nv} vertices and {nf} faces", rest[nv + nf][0])
     return _checked(vertices, corners, sizes, vertex_lines, polygon_lines)
 
 
@@ -297,8 +299,9 @@ def _ply_ascii(data: bytes, start: int, elements: list, order: str, header_lines
     lines = [(number, line.split()) for number, line in enumerate(_lines(data[start:]), header_lines + 1)]
     lines = [(number, tokens) for number, tokens in lines if tokens]
     needed = sum(element.count for element in elements)
-    if needed > len(lines):
-        raise _Malformed(f"the header announces {needed} rows but the file has {len(lines)} more lines")
+    if needed != len(lines):   # a count too small would otherwise drop the rest silently
+        raise _Malformed(f"the header announces {needed} rows but the file has {len(lines)} more lines",
+                         lines[needed][0] if needed < len(lines) else None)
     rows, row_lines, at = {}, {}, 0
     for element in elements:
         values = {name: [] for name, _, _ in element.properties}
@@ -342,6 +345,8 @@ def _ply_binary(data: bytes, start: int, elements: list, order: str, header_line
             at += table.nbytes
         else:
             rows[element.name], at = _ply_binary_rows(data, at, element, order)
+    if data[at:].strip():
+        raise _Malformed(f"{len(data) - at} bytes follow the last row the header announces")
     return rows, {}
 
 
