@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 
 import shadowcl as sc
 
-FUZZ = settings(max_examples=120, deadline=5000, derandomize=True, database=None,
+FUZZ = settings(max_examples=80, deadline=5000, derandomize=True, database=None,
                 suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 FORMATS = ["obj", "off", "ply_ascii", "ply_le", "ply_be", "stl_ascii", "stl_binary"]
 SUFFIX = {"obj": ".obj", "off": ".off", "stl_ascii": ".stl", "stl_binary": ".stl"}

@@ -263,7 +263,7 @@ def _read_ply(data: bytes) -> Polygons:
         elif parts[0] == "property" and elements and len(parts) == 3 and parts[1] in PLY_TYPES:
             elements[-1].properties.append((parts[2], PLY_TYPES[parts[1]], None))
         elif (parts[0] == "property" and elements and len(parts) == 5 and parts[1] == "list"
-              and parts[2] in PLY_TYPES and parts[3] in PLY_TYPES and not parts[2].startswith("f")):
+              and parts[2] in PLY_TYPES and parts[3] in PLY_TYPES and PLY_TYPES[parts[2]][0] in "iu"):
             elements[-1].properties.append((parts[4], PLY_TYPES[parts[3]], PLY_TYPES[parts[2]]))
         else:
             raise _Malformed(f"not a PLY header line: {line.strip()!r}", number)
@@ -282,8 +282,10 @@ def _read_ply(data: bytes) -> Polygons:
              if length is not None and name in FACE_LISTS and not kind.startswith("f")]
     if not lists:
         raise _Malformed(f"the face element needs an integer list property {' or '.join(FACE_LISTS)}", face.line)
-    read = _ply_ascii if order == "ascii" else _ply_binary
-    rows, row_lines = read(data, body_start, elements, order, len(header))
+    if order == "ascii":
+        rows, row_lines = _ply_ascii(data, body_start, elements, len(header))
+    else:
+        rows, row_lines = _ply_binary(data, body_start, elements, order), {}
     xyz = np.stack([rows["vertex"][axis] for axis in "xyz"], axis=1)
     polygons = rows["face"][lists[0]]
     if isinstance(polygons, np.ndarray):        # every face has the same number of corners
@@ -294,7 +296,7 @@ def _read_ply(data: bytes) -> Polygons:
     return _checked(xyz, corners.astype(np.int64), sizes, row_lines.get("vertex"), row_lines.get("face"))
 
 
-def _ply_ascii(data: bytes, start: int, elements: list, order: str, header_lines: int) -> tuple[dict, dict]:
+def _ply_ascii(data: bytes, start: int, elements: list, header_lines: int) -> tuple[dict, dict]:
     """({element: {property: values}}, {element: line number of each row})."""
     lines = [(number, line.split()) for number, line in enumerate(_lines(data[start:]), header_lines + 1)]
     lines = [(number, tokens) for number, tokens in lines if tokens]
@@ -329,8 +331,8 @@ def _ply_ascii(data: bytes, start: int, elements: list, order: str, header_lines
     return rows, row_lines
 
 
-def _ply_binary(data: bytes, start: int, elements: list, order: str, header_lines: int) -> tuple[dict, dict]:
-    """({element: {property: values}}, {}): binary rows have no lines."""
+def _ply_binary(data: bytes, start: int, elements: list, order: str) -> dict:
+    """{element: {property: values}} of rows packed in byte ``order``."""
     rows, at = {}, start
     for element in elements:
         scalars = [(name, order + kind) for name, kind, length in element.properties if length is None]
@@ -347,7 +349,7 @@ def _ply_binary(data: bytes, start: int, elements: list, order: str, header_line
             rows[element.name], at = _ply_binary_rows(data, at, element, order)
     if data[at:].strip():
         raise _Malformed(f"{len(data) - at} bytes follow the last row the header announces")
-    return rows, {}
+    return rows
 
 
 def _ply_binary_rows(data: bytes, at: int, element: _Element, order: str) -> tuple[dict, int]:
