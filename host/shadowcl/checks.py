@@ -115,8 +115,14 @@ def flag(name: str, value) -> bool:
 
 
 def available_host_bytes() -> int | None:
-    """Memory the host can still give this process (Linux's MemAvailable, else free physical pages;
-    None where neither is known)."""
+    """Memory this process can still get: the least of the host's (Linux's MemAvailable, else free
+    physical pages), its cgroup's room and its address-space limit's room; None where none is known."""
+    figures = [_host_free(), _cgroup_room(), _address_space_room()]
+    known = [figure for figure in figures if figure is not None]
+    return max(min(known), 0) if known else None
+
+
+def _host_free() -> int | None:
     try:
         with open("/proc/meminfo") as meminfo:
             for line in meminfo:
@@ -127,6 +133,36 @@ def available_host_bytes() -> int | None:
     try:
         return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_AVPHYS_PAGES")
     except (ValueError, OSError, AttributeError):
+        return None
+
+
+def _cgroup_room() -> int | None:
+    """A container's memory limit less its use (cgroup v2, else v1); None when unlimited or unknown."""
+    for limit_file, usage_file in (("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory.current"),
+                                   ("/sys/fs/cgroup/memory/memory.limit_in_bytes",
+                                    "/sys/fs/cgroup/memory/memory.usage_in_bytes")):
+        try:
+            with open(limit_file) as limit, open(usage_file) as usage:
+                text = limit.read().strip()
+                if text == "max" or int(text) >= 1 << 60:
+                    return None
+                return int(text) - int(usage.read())
+        except (OSError, ValueError):
+            continue
+    return None
+
+
+def _address_space_room() -> int | None:
+    """``ulimit -v`` less this process's virtual size; None when unlimited or unknown."""
+    try:
+        import resource
+
+        limit = resource.getrlimit(resource.RLIMIT_AS)[0]
+        if limit == resource.RLIM_INFINITY:
+            return None
+        with open("/proc/self/statm") as statm:
+            return limit - int(statm.read().split()[0]) * os.sysconf("SC_PAGE_SIZE")
+    except (ImportError, OSError, ValueError, IndexError):
         return None
 
 
