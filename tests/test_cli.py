@@ -76,3 +76,15 @@ def test_usage_errors_are_one_line(capsys):
     assert exit_info.value.code == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--param: expected NAME=VALUE" in err
+
+
+def test_default_output_name_stays_in_the_current_folder(tmp_path, monkeypatch, capsys):
+    work = tmp_path / "work"
+    work.mkdir()
+    scene = tmp_path / "s.toml"
+    scene.write_text('name = "../../escape"\n[[lights]]\ntype = "point"\nposition = [0, 5, 0]\n'
+                     '[[objects]]\nbox = {}\n')
+    monkeypatch.chdir(work)
+    assert main(["render", str(scene), "--size", "8x8"]) == 0
+    assert [path.name for path in work.iterdir()] == ["shadowcl-____escape-exact.png"]
+    assert not list(tmp_path.glob("*.png"))

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import ast
 import os
+import re
 import sys
 import time
 from pathlib import Path
@@ -69,7 +70,8 @@ def run_render(args) -> int:
 
     started = time.perf_counter()
     scene = Scene.load(args.scene)
-    out = args.out or Path(f"shadowcl-{scene.name}-{args.method}.png")
+    # the scene's name comes from its file: no separators or '..' into the default output path
+    out = args.out or Path(re.sub(r"[^\w.-]|\.\.", "_", f"shadowcl-{scene.name}-{args.method}") + ".png")
     _check_writable(out)
     load_time = time.perf_counter() - started
     width, height = args.size or (None, None)
