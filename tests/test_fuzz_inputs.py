@@ -3,7 +3,7 @@
 Each example either loads a correct mesh or raises ValueError/TypeError (FileNotFoundError for a scene's
 missing mesh) whose message names the file; nothing else may escape. Unmutated files must load the
 mesh they were written from, and a mutation whose effect is known (a bad number, a bad index) must be
-refused at its line. Examples are derandomized and counted, so the run is bounded (about 15 s here).
+refused at its line. Examples are derandomized and counted, so the run is bounded (9 s here at load 10).
 """
 
 import copy

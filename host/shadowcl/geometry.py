@@ -38,6 +38,8 @@ class Mesh:
             raise ValueError(f"faces: negative vertex index {low}")
         if high >= len(vertices):
             raise ValueError(f"faces: vertex index {high} out of range for {len(vertices)} vertices")
+        if high > np.iinfo(np.int32).max:   # faces are stored int32: a larger index would wrap silently
+            raise ValueError(f"faces: vertex index {high} does not fit int32; at most 2^31 vertices are used")
         if np.abs(vertices).max() >= np.finfo(np.float32).max:
             raise ValueError("vertices: coordinates overflow float32")
         self.vertices = np.array(vertices, dtype=np.float32, order="C")   # copies: never the caller's buffer
