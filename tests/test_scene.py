@@ -378,6 +378,8 @@ BAD_FILES = [
     (OBJECT + "subdivision = { vertices = [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [2, 0, 0], [2, 1, 0], [3, 0, 0], "
               "[3, 1, 0]], faces = [[0, 1, 2, 3], [1, 4, 5, 2], [4, 6, 7, 5]] }\ntessellation = 1024\n", ValueError,
      r"objects\[0\]: segments: 1024 per control edge make 3,145,728 cells"),
+    (OBJECT + "union = [" + ", ".join(["{ sphere = { segments = 2048 } }"] * 5) + "]\n", ValueError,
+     r"objects: the spheres and cylinders would make about 10,485,760 triangles; at most 8,388,608 in one scene"),
     (OBJECT + "box = { size = 1e300 }\n", ValueError, r"objects\[0\]: vertices: coordinates overflow float32"),
     (OBJECT + 'mesh = "good.obj"\nscale = 1e300\n', ValueError, r"objects\[0\]: vertices: coordinates overflow float32"),
     (OBJECT + 'mesh = "bad.obj"\n', ValueError, r"objects\[0\]\.mesh: path: .*bad\.obj: line 2: expected three numbers"),

@@ -93,6 +93,8 @@ DEFAULT_SEGMENTS = 32
 MAX_PRIMITIVE_TRIANGLES = 1 << 21
 MAX_SPHERE_SEGMENTS = int(np.sqrt(2 * MAX_PRIMITIVE_TRIANGLES))
 MAX_CYLINDER_SEGMENTS = (MAX_PRIMITIVE_TRIANGLES + 4) // 4
+# ... and all of a scene file's primitives together (CSG keeps its operands until it combines them).
+MAX_SCENE_PRIMITIVE_TRIANGLES = 1 << 23
 # Largest image side a scene may ask renderers for (render.MAX_SIDE is this).
 MAX_RENDER_SIDE = 16384
 # Deepest CSG nesting read from a file: far beyond any real scene, well within Python's recursion limit.
@@ -430,6 +432,10 @@ SCENE_KEYS = ("name", "render", "camera", "lights", "objects")
 
 def _read_scene(root: _Table, path: Path) -> Scene:
     root.allow_only(SCENE_KEYS)
+    triangles = _primitive_triangles(root.data.get("objects"))
+    if triangles > MAX_SCENE_PRIMITIVE_TRIANGLES:
+        raise root.invalid("objects", f"the spheres and cylinders would make about {triangles:,} triangles; "
+                                      f"at most {MAX_SCENE_PRIMITIVE_TRIANGLES:,} in one scene")
     objects, colors = [], []
     for table in root.tables("objects"):
         name, shape, color = _read_object(table, path.parent)
@@ -446,6 +452,26 @@ def _read_scene(root: _Table, path: Path) -> Scene:
         render_size=None if render is None else _read_render_size(render),
         path=path,
     )
+
+
+def _primitive_triangles(value) -> int:
+    """Triangles the spheres and cylinders anywhere in a TOML value would make, counted before any is
+    built; a bad ``segments`` counts nothing here (reading the shape names it)."""
+    total, stack = 0, [value]
+    while stack:   # a loop, not recursion: [[objects.union.union...]] tables nest without bound
+        item = stack.pop()
+        if isinstance(item, list):
+            stack.extend(item)
+        elif isinstance(item, dict):
+            for key, inner in item.items():
+                segments = inner.get("segments", DEFAULT_SEGMENTS) if isinstance(inner, dict) else None
+                limit = {"sphere": MAX_SPHERE_SEGMENTS, "cylinder": MAX_CYLINDER_SEGMENTS}.get(key, 0)
+                if isinstance(segments, int) and 3 <= segments <= limit:
+                    rounded = -(-segments // 4) * 4   # manifold3d rounds a sphere's segments up to a multiple of 4
+                    total += rounded ** 2 // 2 if key == "sphere" else 4 * segments - 4
+                else:
+                    stack.append(inner)
+    return total
 
 
 def _read_camera(table: _Table) -> Camera:
