@@ -60,6 +60,7 @@ def test_output_and_parameter_errors_are_one_line_before_rendering(tmp_path, cap
           str(PROJECT / "scenes" / "subdivision" / "cube.toml")], "connectivity: expected one of 6, 18, 26, got 26.0"),
         (["--size", "20000x10"], "width: must be between 1 and 16384, got 20000"),
         ([str(tmp_path / "none.toml")], "none.toml: no such scene file"),
+        (["--device", "no such device", "--out", str(tmp_path / "d.png")], "no OpenCL device matches"),
     ]
     for args, message in cases:
         assert main(["render", "--size", "8x8", *args]) == 2

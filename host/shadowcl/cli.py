@@ -142,7 +142,9 @@ def main(argv=None) -> int:
             return run_devices()
         return run_methods()
     except (ValueError, TypeError, OSError, RuntimeError, MemoryError) as error:
-        print(f"shadowcl: error: {error}", file=sys.stderr)
+        # one line, even for a message that lists things (the devices, say) on lines of its own
+        message = "; ".join(line.strip() for line in str(error).splitlines() if line.strip()).replace(":; ", ": ")
+        print(f"shadowcl: error: {message}", file=sys.stderr)
         return 2
 
 
