@@ -8,6 +8,7 @@
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import time
 
@@ -51,8 +52,8 @@ class Shadows:
         self._mesh = mesh
         self._frame = frame_for(mesh, move=not cls.scene_input)
         self._occluders = occluders(cls, scene_or_mesh) if cls.scene_input else self._frame.mesh(mesh)
-        self._params = params
-        self._instance = cls(self._device, **params)
+        self._params = copy.deepcopy(params)   # kept for _fitted_to: never the caller's arrays
+        self._instance = cls(self._device, **self._params)
         self._prepare_s = self._classify_s = self._check_s = 0.0
         self._outside = 0
         self._receivers = 0
