@@ -163,7 +163,6 @@ class ShadowMapMethod(Method):
     points beyond them from maps fitted to them); :meth:`visibility` is the filtered answer."""
 
     name = "shadow_map"
-    point_light_reach = 2.0 ** 7    # measured (bench/range.py): depth compares fail from ~1e3 sizes
     bounded = True
     parameters = {
         "resolution": (None, f"texels per side of each (square) depth map; None picks {DEFAULT_RESOLUTION}"),
