@@ -9,7 +9,7 @@ Two scenes made here (not in ../shared): an icosphere at y = 1 over a 6 x 6 grou
 1,500 seeded ground receivers (``--quick``: 500), no normals. Truth is the float64 brute force
 (``shadowcl.reference.exact``).
 
-- **distance**: a point light at 10 .. 3e6 scene sizes (box diagonals of occluders and receivers)
+- **distance**: a point light at 10 .. 1e7 scene sizes (box diagonals of occluders and receivers)
   along the scene's direction. Each method is prepared in the working frame with the distant-light
   substitution lifted (``Frame.light(..., limit=DIRECTIONAL_DISTANCE)``: the method's own float32
   arithmetic), and through the public call (``sc.shadow_mask``, which substitutes beyond the method's
@@ -38,7 +38,7 @@ from shadowcl.points import check_points
 from shadowcl.reference.exact import shadow_mask as truth
 
 METHODS = ("exact", "shadow_map", "angular", "shadow_volume")
-DISTANCES = (1e1, 1e2, 1e3, 1e4, 3e4, 1e5, 3e5, 1e6, 3e6)
+DISTANCES = (1e1, 1e2, 1e3, 1e4, 3e4, 1e5, 3e5, 1e6, 3e6, 1e7)
 OFFSETS = (0.0, 1e-7, 1e-6, 1e-5, 1e-4, 1e-3, 1e-2)
 
 

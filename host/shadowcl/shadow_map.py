@@ -163,7 +163,7 @@ class ShadowMapMethod(Method):
     points beyond them from maps fitted to them); :meth:`visibility` is the filtered answer."""
 
     name = "shadow_map"
-    point_light_reach = 2.0 ** 21   # measured (bench/range.py): right to 3e6 scene sizes, 3 of 1,500 wrong at 1.25e7
+    point_light_reach = 2.0 ** 21   # measured (bench/range.py): right to 3e6 scene sizes, 2 of 1,500 wrong at 1e7
     bounded = True
     parameters = {
         "resolution": (None, f"texels per side of each (square) depth map; None picks {DEFAULT_RESOLUTION}"),
