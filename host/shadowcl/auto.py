@@ -38,6 +38,7 @@ import time
 import numpy as np
 
 from .checks import non_negative_float, positive_float, positive_int
+from .frame import check_clearance, is_distant, union
 from .methods import Method, method_class, with_receiver_count
 from .points import BOUNDS_SLACK, Points, check_points
 
@@ -104,6 +105,8 @@ class AutoMethod(Method):
     """The cheapest candidate within ``max_error`` on the caller's receivers (module docstring)."""
 
     name = "auto"
+    point_light_reach = method_class("exact").point_light_reach   # the ruler's and fallback's limits
+    min_light_clearance = method_class("exact").min_light_clearance
     parameters = {
         "max_error": (DEFAULT_MAX_ERROR, "largest fraction of receivers that may be classified unlike the exact "
                                          "method, with 99 % confidence"),
@@ -198,9 +201,14 @@ class AutoMethod(Method):
     def _trial(self, name, settings, occluders, light, box, eps, sample, truth, total):
         """Prepare candidate ``name`` with ``settings``, classify the sample: (record, instance or None)."""
         record = {"method": name, **settings}
-        instance = method_class(name)(self.device, **with_receiver_count(name, settings, total))
+        cls = method_class(name)
+        instance = cls(self.device, **with_receiver_count(name, settings, total))
         clock = time.perf_counter()
         try:
+            # the light as the public calls would judge it for this method (Shadows did it for exact's)
+            check_clearance(occluders, light, cls.min_light_clearance, name)
+            if is_distant(light, union(occluders.bounds, box), cls.point_light_reach):
+                raise ValueError(f"light: beyond the {name} method's point_light_reach")
             instance.prepare(occluders, light, box, eps)
             self.device.queue.finish()
         except ValueError as error:          # the method cannot answer this query (e.g. refuses the light)
