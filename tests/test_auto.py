@@ -189,3 +189,18 @@ def test_max_time_caps_the_trials(device):
     calibration = shadows.stats["calibration"]
     assert shadows.params["chosen"] == {"method": "exact"} and calibration["trials_s"] == 0.0
     assert calibration["tried"] and all("skipped" in record for record in calibration["tried"])
+
+
+def test_calibration_receivers_are_moved_to_the_working_frame(device):
+    """The method works in the occluders' frame: the receivers it calibrates on are moved there too."""
+    mesh, light, points, normals = shape_on_ground("torus", 400_000)
+    shift = np.array([3e4, -2e3, 1e4])
+    moved = sc.Mesh(mesh.vertices + shift, mesh.faces)
+    shadows = sc.prepare(moved, sc.PointLight(light.position + shift), "auto", device=device,
+                         receivers=(points + shift, normals), max_error=1e-2)
+    np.testing.assert_allclose(shadows._instance.receivers.bounds, shadows._frame.points(np.array(
+        [points.min(0), points.max(0)]) + shift), atol=1e-9)
+    truth = sc.shadow_mask(moved, sc.PointLight(light.position + shift), points + shift, normals, device=device)
+    answer = sc.shadow_mask(moved, sc.PointLight(light.position + shift), points + shift, normals, method="auto",
+                            max_error=1e-2, device=device)
+    assert np.mean(answer != truth) <= 1e-2
