@@ -34,6 +34,7 @@ A candidate that refuses the query (a method that cannot take the light) is skip
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -48,7 +49,6 @@ OVERHEAD_SHARE = 0.1        # calibration may spend this share of exact's predic
 SAMPLE_SHARE = 0.05         # a sample above this share of the receivers costs more than a candidate can save
 BOUNDS_RECEIVERS = 1_000_000  # receivers assumed by a prepare without receivers or expected_receivers
 SAMPLE_SEED = 20261202
-POOL = 400_000              # receivers moved to the working frame for calibration (calibration_pool)
 MIN_SAMPLE = 4000           # at 1e-2 a candidate at half the budget (20 of 4 k wrong) passes, bound 0.83 %;
                             # lod's 20 k floor cost 4-8 % of exact's time here
 SCALING_RECEIVERS = 200_000  # a query this large measures how the sample's time extrapolates
@@ -74,7 +74,7 @@ CANDIDATES = (
 
 def calibration_receivers(given) -> Points | None:
     """The ``receivers=`` parameter checked: None, a ``Points``, points (N, 3) or ``(points, normals)``."""
-    if given is None or isinstance(given, Points):
+    if given is None or isinstance(given, (Points, FramedReceivers)):
         return given
     return check_points(*given) if isinstance(given, tuple) and len(given) == 2 else check_points(given)
 
@@ -87,14 +87,32 @@ def calibration_sample(receivers: Points, count: int, seed: int = SAMPLE_SEED) -
     return receivers.subset(np.sort(rng.integers(0, len(receivers), size=count)))
 
 
-def calibration_pool(given, frame) -> Points:
-    """What :class:`shadowcl.Shadows` hands a method to calibrate on: the caller's receivers ``given``
-    (as :func:`calibration_receivers` takes them) moved to the working ``frame``, at most
-    :data:`POOL` of them drawn by :func:`calibration_sample` (moving all 1.2 M cost 40 ms, ~13 % of
-    exact's call; a method's sample from the pool is then a draw from draws: its pairs are independent
-    except where two hit the same pool entry, ~n^2 / (2 POOL) pairs, 360 of the 17 k at 1e-3)."""
-    receivers = calibration_receivers(given)
-    return frame.receivers(receivers if len(receivers) <= POOL else calibration_sample(receivers, POOL, SAMPLE_SEED + 1))
+@dataclass(frozen=True, eq=False)
+class FramedReceivers:
+    """The caller's receivers (``world``, a ``Points``) as a method in the working ``frame`` sees them
+    (:class:`shadowcl.Shadows` hands them so), moved there only as they are drawn from: moving all
+    1.2 M took 40 ms, ~13 % of exact's call, for a sample of a few thousand."""
+
+    world: Points
+    frame: object
+
+    def __len__(self) -> int:
+        return len(self.world)
+
+    @property
+    def normals(self):
+        return self.world.normals
+
+    @property
+    def bounds(self) -> np.ndarray:
+        return self.frame.points(self.world.bounds)
+
+    @property
+    def positions(self) -> np.ndarray:
+        return self.frame.receivers(self.world).positions
+
+    def subset(self, index) -> Points:
+        return self.frame.receivers(self.world.subset(index))
 
 
 def bounds_sample(bounds: np.ndarray, count: int, seed: int = SAMPLE_SEED) -> Points:
@@ -263,6 +281,6 @@ class AutoMethod(Method):
 
     def resolved_params(self) -> dict:
         """The budget and the choice: ``chosen`` is the method and its parameters as used."""
-        source = None if self.receivers is None else f"a pool of {len(self.receivers):,} receivers"
+        source = None if self.receivers is None else f"{len(self.receivers):,} receivers"
         return {"max_error": self.max_error, "max_time": self.max_time, "receivers": source,
                 "expected_receivers": self.expected, "chosen": dict(self._chosen_params)}

@@ -52,26 +52,23 @@ class Shadows:
         self._mesh = mesh
         self._frame = frame_for(mesh, move=not cls.scene_input)
         self._occluders = occluders(cls, scene_or_mesh) if cls.scene_input else self._frame.mesh(mesh)
-        self._params = self._copied(cls, params)   # kept for _fitted_to: never the caller's arrays
+        self._params = self._copied(params)   # kept for _fitted_to: never the caller's arrays
         self._instance = cls(self._device, **self._params)
         self._prepare_s = self._classify_s = self._check_s = 0.0
         self._outside = 0
         self._receivers = 0
         self.relight(self.light)
 
-    def _copied(self, cls, params: dict) -> dict:
+    def _copied(self, params: dict) -> dict:
         """``params`` deep-copied, with ``receivers`` (what method="auto" and lod="auto" calibrate on)
-        moved to the frame like every query's receivers (:func:`shadowcl.auto.calibration_pool`: a new
-        ``Points``, so not copied again); "auto" is told how many there were."""
+        moved to the frame like every query's receivers (:class:`shadowcl.auto.FramedReceivers`: as they
+        are drawn from, and not copied)."""
         receivers = params.get("receivers")
         copied = copy.deepcopy({key: value for key, value in params.items() if key != "receivers"})
         if receivers is None:
             return copied
-        from .auto import calibration_pool, calibration_receivers
-        receivers = calibration_receivers(receivers)
-        told = "expected_receivers" not in cls.parameters or copied.get("expected_receivers") is not None
-        count = {} if told else {"expected_receivers": len(receivers)}
-        return {**copied, **count, "receivers": calibration_pool(receivers, self._frame)}
+        from .auto import FramedReceivers, calibration_receivers
+        return {**copied, "receivers": FramedReceivers(calibration_receivers(receivers), self._frame)}
 
     def relight(self, light) -> None:
         """Build the structure again for another ``light``, on the same method instance: what does not
