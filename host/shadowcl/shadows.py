@@ -268,7 +268,9 @@ def prepare(scene_or_mesh, light, method: str = "exact", bounds=None, device=Non
     ``bounds`` ((2, 3) low and high corners) is the receivers' box the structure is fitted to; None
     means the scene's bounds. ``eps`` is absolute when given, else 1e-4 of the scene's bounding-box
     diagonal. ``device`` is a :class:`Device`, a selector string or None (the default device).
-    ``params`` are the method's parameters (:func:`shadowcl.methods`).
+    ``params`` are the method's parameters (:func:`shadowcl.methods`). ``method="auto"``
+    (:mod:`shadowcl.auto`) picks the cheapest method within ``max_error`` of the exact one, calibrated on
+    ``receivers=`` (:func:`shadow_mask` and the renderer pass theirs; without them, on the bounds).
     """
     return Shadows(scene_or_mesh, light, method, bounds, device, eps, **params)
 
