@@ -37,6 +37,16 @@ receivers on the ground + 200 k on the model, random order, PoCL on 2 cores; ran
   these scenes wrongly), so 'cells' is the default by the sum and the worst case. Lanes: 8 against 1
   on light_inside 95 / 169 ms with normals, 4 lanes 108; 16 crashes PoCL's LLVM 14 ("Do not know how
   to scalarize"), double8 arithmetic miscompiled there (ray_triangle.h's refinement is per lane).
+- Binning without recomputing (2026-12-02): pass 1 keeps each receiver's start (16 bytes, the caller's
+  order), pass 2 scatters only that start and the receiver's index (it found its cell again from the
+  start: a few flops against re-reading float64 points and normals), the walk reads them in order and
+  finds the cells once more. Against the previous fill (which redid the start from the points and
+  normals and scattered 32-byte records), own scene (six perturbed icospheres on a ground slab, 30.7 k
+  triangles, 1.2 M receivers, with normals), per-kernel medians of 7, old / new interleaved under a
+  load average of 11-13 (3 rounds): fill 448 / 172, 330 / 73, 126 / 40 ms; one-shot call 1114 / 852,
+  850 / 407, 365 / 270 ms. Without normals (the old fill re-read only the points) it is a wash: one-shot
+  606 / 597, 626 / 867, 791 / 796 ms (pass 1 pays for writing the starts). Tried and dropped: the walk gathering 32-byte records through the index
+  (no scatter pass): its gathers cost what the scatter saved (149-155 against 146 ms, quiet machine).
 - Watertight against dot5: the same speed within noise (the cull does most of the rejecting); dot5
   leaks on 6-8% of rays aimed at shared edges and vertices, watertight on none.
 - Slivers and long strips (aspect ratios to 1e-4): the float32 edge functions decide inside-ness
