@@ -8,13 +8,14 @@
  *
  * The passes: the count / scan / fill of the occluder lists (lightspace.cl) applied to the receivers,
  * then the walk in the irregular Z-buffer's traversal order (the receivers of a cell together):
- *   exact_bin_count  per receiver: check it, start it (s and its interval), find its fine and coarse
- *                    cells, write both in the caller's order, take a slot in the fine cell (atomic_inc on
- *                    its count); the code of a receiver needing no walk
+ *   exact_bin_count  per receiver: check it, start it (s and its interval), write the start in the
+ *                    caller's order, find its fine cell and take a slot there (atomic_inc on its count);
+ *                    the code of a receiver needing no walk
  *   (host)           exclusive prefix sum of the counts (lightspace.ListBuilder.prefix_sum)
- *   exact_bin_fill   per receiver with a slot: its index at its cell's offset + its slot (4 bytes
- *                    scattered, not the whole record: the walk gathers the record through it)
- *   exact_classify   per packet of LANES consecutive indices: the receivers of a cell share its list,
+ *   exact_bin_fill   per receiver with a slot: its start and its index at its cell's offset + its slot
+ *                    (the cell found again from the start, not from the points and normals)
+ *   exact_classify   per packet of LANES consecutive binned receivers (cells found again from their
+ *                    starts): the receivers of a cell share its list,
  *                    each triangle is loaded once and tested against all the packet's lanes still
  *                    unshadowed (plane cull and test over lanes: ray_triangle.h, vecmath.h), the walk
  *                    ends when they are all shadowed; each answer is written at its receiver's index.
