@@ -1,9 +1,11 @@
-"""The ``shadowcl`` command: ``render`` a scene to PNG, list ``devices`` and ``methods``."""
+"""The ``shadowcl`` command: ``render`` a scene to PNG, ``sun-hours`` on its sensors, list ``devices`` and
+``methods``."""
 
 from __future__ import annotations
 
 import argparse
 import ast
+import contextlib
 import sys
 import time
 from pathlib import Path
@@ -11,6 +13,7 @@ from pathlib import Path
 from . import scenes as _scene_package
 
 DEFAULT_SCENE = Path(_scene_package.__file__).resolve().parent / "default.toml"
+CITY_BLOCK = Path(_scene_package.__file__).resolve().parent / "city_block.toml"
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -45,6 +48,20 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("--size", type=parse_size, help="image size WIDTHxHEIGHT (default: the scene's, else 960x540)")
     render.add_argument("--device", help="OpenCL device: 'P:D' indices or part of its name")
     render.add_argument("--param", type=parse_param, action="append", default=[], help="method parameter NAME=VALUE (repeatable)")
+
+    sun = commands.add_parser("sun-hours", help="hours of direct sun on a scene's sensor grids (.npy, .csv, heat map)")
+    sun.add_argument("scene", nargs="?", type=Path, default=CITY_BLOCK, help="scene .toml with [[sensors]] (default: the city block)")
+    sun.add_argument("--start", help="first time, e.g. 2026-06-21 (default: the scene's [sun])")
+    sun.add_argument("--end", help="end time, excluded (default: the scene's [sun])")
+    sun.add_argument("--step", help="time step, e.g. 1h or 15min (default: the scene's [sun], else 1h)")
+    sun.add_argument("--lat", type=float, help="latitude in degrees (default: the scene's [sun])")
+    sun.add_argument("--lon", type=float, help="longitude in degrees (default: the scene's [sun])")
+    sun.add_argument("--spacing", type=float, help="sensor grid step, replacing the scene's")
+    cluster = sun.add_mutually_exclusive_group()
+    cluster.add_argument("--workers", type=int, help="run on a local Dask cluster of N worker processes")
+    cluster.add_argument("--scheduler", help="run on the Dask scheduler at this address")
+    sun.add_argument("--out", type=Path, default=Path("sun-hours.png"), help="heat map PNG; .npy and .csv beside it")
+    sun.add_argument("--device", help="OpenCL device (local runs): 'P:D' indices or part of its name")
 
     commands.add_parser("devices", help="list OpenCL devices")
     commands.add_parser("methods", help="list shadow methods and their parameters")
@@ -83,6 +100,50 @@ def run_render(args) -> int:
     return 0
 
 
+def run_sun_hours(args) -> int:
+    from .scene import Scene
+    from .sunhours import sun_hours, write
+
+    scene = Scene.load(args.scene)
+    site = dict(scene.sun or {})
+    given = dict(latitude=args.lat, longitude=args.lon, start=args.start, end=args.end, step=args.step)
+    site.update({key: value for key, value in given.items() if value is not None})
+    missing = [key for key in ("latitude", "longitude", "start", "end") if key not in site]
+    if missing:
+        raise ValueError(f"{args.scene}: no [sun] table gives {', '.join(missing)}; pass --lat, --lon, --start, --end")
+    if args.workers is not None and args.workers < 1:
+        raise ValueError(f"--workers: must be at least 1, got {args.workers}")
+    started = time.perf_counter()
+    with _cluster_client(args) as client:
+        result = sun_hours(scene, site["latitude"], site["longitude"], str(site["start"]), str(site["end"]),
+                           site.get("step", "1h"), site.get("timezone", "UTC"), site.get("north", (0.0, 0.0, -1.0)),
+                           spacing=args.spacing, client=client, progress=True,
+                           **({} if client is not None else {"device": args.device}))
+    seconds = time.perf_counter() - started
+    paths = write(result, args.out)
+    print(f"scene {scene.name}: {len(result.hours)} sensors, {result.steps} sun-up steps of {result.step_hours:g} h, "
+          f"{seconds:.1f} s ({len(result.hours) * result.steps / max(seconds, 1e-9) / 1e6:.1f} M sensor-suns/s)")
+    print(f"hours of direct sun: min {result.hours.min():.1f}, mean {result.hours.mean():.1f}, max {result.hours.max():.1f}")
+    print("wrote " + ", ".join(str(path.resolve()) for path in paths))
+    return 0
+
+
+@contextlib.contextmanager
+def _cluster_client(args):
+    """None for a local run, else a Dask client: a LocalCluster of --workers, or --scheduler's."""
+    if args.workers is None and args.scheduler is None:
+        yield None
+        return
+    from .distributed import connect, local_cluster
+
+    if args.scheduler is not None:
+        with connect(args.scheduler) as client:
+            yield client
+        return
+    with local_cluster(args.workers) as cluster, connect(cluster.scheduler_address) as client:
+        yield client
+
+
 def run_devices() -> int:
     from .device import list_devices
 
@@ -106,6 +167,8 @@ def main(argv=None) -> int:
     try:
         if args.command == "render":
             return run_render(args)
+        if args.command == "sun-hours":
+            return run_sun_hours(args)
         if args.command == "devices":
             return run_devices()
         return run_methods()

@@ -50,6 +50,23 @@ scale, rotate, translate. The shape keys (primitive parameters are optional, def
     tessellation = 8                                  # subdivision only: segments per control edge
                                                       # (default: SubdivisionSurface.default_segments)
 
+For sun-hours studies (``shadowcl sun-hours``, :mod:`shadowcl.sun`), optionally::
+
+    [sun]                              # the site and the period: Scene.sun, a dict of these keys
+    latitude = 48.85                   # degrees, within ±90 (north positive)
+    longitude = 2.35                   # degrees, within ±180 (east positive)
+    start = "2026-01-01"               # a TOML date or datetime, or a string pandas reads
+    end = "2027-01-01"                 # excluded
+    step = "1h"                        # a pandas time step
+    timezone = "UTC"                   # of start and end when they carry none (optional, default UTC)
+    north = [0, 0, -1]                 # the scene's north (optional, default -z; up is +y)
+
+    [[sensors]]                        # grids of sensor points: Scene.sensors, a list of dicts
+    name = "roofs"
+    objects = ["tower", "hall"]        # names of objects whose upward-facing triangles carry the grid
+    spacing = 1.0                      # grid step in scene units (a square grid seen from above)
+    offset = 0.01                      # along the face's normal (optional, default 0.01)
+
 A ``subdivision`` object is a :class:`~shadowcl.subdivision.SubdivisionSurface` (its transform applied
 to the control points, which moves the limit surface exactly); it is listed in :attr:`Scene.surfaces`
 and its tessellation is its mesh in :attr:`Scene.objects`, so every triangle method works unchanged. In
@@ -68,6 +85,7 @@ list of allowed keys.
 
 from __future__ import annotations
 
+import datetime
 import operator
 import tomllib
 from contextlib import contextmanager
@@ -119,6 +137,9 @@ class Scene:
         render_size: ``(width, height)`` a renderer should use by default, or None.
         path: the scene file, or None for a scene built in code.
     """
+
+    sun: dict | None = None     # a scene file's [sun] table, checked (module docstring)
+    sensors: tuple = ()         # its [[sensors]] tables, checked: dicts of name, objects, spacing, offset
 
     def __init__(self, objects, lights, camera=None, name="scene", colors=None, render_size=None, path=None):
         """``objects`` is a list of ``(name, Mesh)``, ``(name, SubdivisionSurface)`` or
@@ -402,7 +423,9 @@ SUBDIVISION_KEY = "subdivision"  # a Catmull-Clark control mesh, kept as a Subdi
 SHAPE_KEYS = tuple(PRIMITIVES) + tuple(CSG_OPERATORS) + RAW_KEYS + (SUBDIVISION_KEY,)
 TRANSFORM_KEYS = ("scale", "rotate", "translate")
 OBJECT_KEYS = ("name", "color") + SHAPE_KEYS + TRANSFORM_KEYS + ("tessellation",)
-SCENE_KEYS = ("name", "render", "camera", "lights", "objects")
+SCENE_KEYS = ("name", "render", "camera", "lights", "objects", "sun", "sensors")
+SUN_KEYS = ("latitude", "longitude", "start", "end", "step", "timezone", "north")
+SENSOR_KEYS = ("name", "objects", "spacing", "offset")
 
 
 def _read_scene(root: _Table, path: Path) -> Scene:
@@ -414,7 +437,7 @@ def _read_scene(root: _Table, path: Path) -> Scene:
         colors.append(color)
     camera = root.table("camera", None)
     render = root.table("render", None)
-    return Scene(
+    scene = Scene(
         objects,
         [_read_light(table) for table in root.tables("lights")],
         camera=None if camera is None else _read_camera(camera),
@@ -423,6 +446,43 @@ def _read_scene(root: _Table, path: Path) -> Scene:
         render_size=None if render is None else _read_render_size(render),
         path=path,
     )
+    sun = root.table("sun", None)
+    scene.sun = None if sun is None else _read_sun(sun)
+    names = [name for name, _ in scene.objects]
+    scene.sensors = tuple(_read_sensors(table, names) for table in root.tables("sensors"))
+    return scene
+
+
+def _read_sun(table: _Table) -> dict:
+    table.allow_only(SUN_KEYS)
+    sun = {"latitude": table.number("latitude"), "longitude": table.number("longitude")}
+    for key, limit in (("latitude", 90), ("longitude", 180)):
+        if abs(sun[key]) > limit:
+            raise table.invalid(key, f"must be within ±{limit} degrees, got {sun[key]}")
+    for key in ("start", "end"):
+        value = table.raw(key)
+        if not isinstance(value, (str, datetime.date)):
+            raise TypeError(f"{table.path(key)}: expected a date, a datetime or a string, got {_toml_type(value)}")
+        sun[key] = value
+    sun["step"] = table.text("step", "1h")
+    sun["timezone"] = table.text("timezone", "UTC")
+    sun["north"] = table.vector("north", (0.0, 0.0, -1.0), nonzero=True)
+    return sun
+
+
+def _read_sensors(table: _Table, object_names: list) -> dict:
+    table.allow_only(SENSOR_KEYS)
+    objects = table.raw("objects")
+    if not (isinstance(objects, list) and objects and all(isinstance(name, str) for name in objects)):
+        raise TypeError(f"{table.path('objects')}: expected a non-empty array of object names, got {objects!r}")
+    unknown = sorted(set(objects) - set(object_names))
+    if unknown:
+        raise table.invalid("objects", f"no object named {', '.join(unknown)}; objects: {', '.join(object_names)}")
+    offset = table.number("offset", 0.01)
+    if offset < 0:
+        raise table.invalid("offset", f"must not be negative, got {offset}")
+    return {"name": table.text("name", "sensors"), "objects": objects,
+            "spacing": table.number("spacing", positive=True), "offset": offset}
 
 
 def _read_camera(table: _Table) -> Camera:
