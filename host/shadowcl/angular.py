@@ -112,7 +112,9 @@ from .geometry import Mesh
 from .lights import PointLight, check_light
 from .methods import Method, check_prepare
 from .points import check_points
+from .lightspace import box_corners
 from .silhouette import edge_adjacency, silhouette_edges, silhouette_loops
+from .topology import components, concave_edges
 
 REC_FLOATS = 8                 # kernels/angular.cl: REC
 MIN_ROWS, MAX_ROWS = 16, 1 << 16
@@ -413,15 +415,9 @@ def loop_pairs(device, vertices_g, loops, frame: Frame, stats: dict):
 def lit_regions(adjacency, facing: np.ndarray) -> np.ndarray:
     """(F,) int: connected regions of light-facing faces (joined across edges with both faces facing the
     light), -1 for the others. The loops bounding one region (an outer loop and its holes) pair together."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
     pairs = adjacency.edge_faces[adjacency.face_count == 2]
     both = facing[pairs[:, 0]] & facing[pairs[:, 1]]
-    nfaces = len(facing)
-    graph = coo_matrix((np.ones(int(both.sum())), (pairs[both, 0], pairs[both, 1])), shape=(nfaces, nfaces))
-    label = connected_components(graph, directed=False)[1]
-    return np.where(facing, label, -1)
+    return np.where(facing, components(len(facing), pairs[both]), -1)
 
 
 def edge_regions(adjacency, facing: np.ndarray, edges: np.ndarray, regions: np.ndarray) -> np.ndarray:
@@ -432,23 +428,12 @@ def edge_regions(adjacency, facing: np.ndarray, edges: np.ndarray, regions: np.n
 
 
 def concave_creases(adjacency, facing: np.ndarray) -> np.ndarray:
-    """Edges between two light-facing faces where the surface folds inwards (the far corner of one face
-    lies on the outer side of the other's plane): a valley seen from the light, which a chord between the
-    loop's crossings would cut off. Section 5 inserts such edges in duplicate for depth; the convex ones
-    lie in front of the chord and need none."""
-    two = adjacency.face_count == 2
-    ids = np.flatnonzero(two)
+    """Concave edges (:func:`shadowcl.topology.concave_edges`) between two light-facing faces: a valley
+    seen from the light, which a chord between the loop's crossings would cut off. Section 5 inserts such
+    edges in duplicate for depth; the convex ones lie in front of the chord and need none."""
+    ids = np.flatnonzero(adjacency.face_count == 2)
     f = adjacency.edge_faces[ids]
-    ids, f = ids[facing[f[:, 0]] & facing[f[:, 1]]], f[facing[f[:, 0]] & facing[f[:, 1]]]
-    v = np.asarray(adjacency.vertices, dtype=np.float64)
-    tri = v[adjacency.faces[f[:, 0]]]
-    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    other = adjacency.faces[f[:, 1]]
-    ends = adjacency.edges[ids]
-    far = other.sum(axis=1) - ends.sum(axis=1)                     # the corner of face 2 off the edge
-    out = v[far] - v[ends[:, 0]]
-    rise = np.einsum("ij,ij->i", normal, out)
-    return ids[rise > 1e-6 * np.linalg.norm(normal, axis=1) * np.linalg.norm(out, axis=1)]
+    return concave_edges(adjacency, ids[facing[f[:, 0]] & facing[f[:, 1]]])
 
 
 def pole_hits(adjacency, facing: np.ndarray, regions: np.ndarray, local) -> tuple[np.ndarray, np.ndarray]:
@@ -506,27 +491,6 @@ def table_entries(device, table: Table) -> dict:
     ident = rec[:, 6].view(np.int32)
     return dict(offsets=offsets, row=np.repeat(np.arange(rows), np.diff(offsets)), face=ident,
                 region=np.where(ident < 0, -ident - 1, -1), s_lo=rec[:, 0], s_hi=rec[:, 1], plane=rec[:, 2:6])
-
-
-def closed_faces(adjacency) -> tuple[np.ndarray, np.ndarray]:
-    """((F,) bool, (F,) int): faces of connected components (faces joined by shared edges) that are closed
-    manifolds, consistently wound, and each face's component label. In a closed component a blocked ray
-    always crosses a light-facing face, so only those enter the table; the other components' faces all
-    enter (a hidden face of an open mesh can stop a ray)."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    nfaces = len(adjacency.faces)
-    owner = np.repeat(np.arange(len(adjacency.edges)), adjacency.face_count)   # edge of each CSR face item
-    first = adjacency.face_items[adjacency.face_offsets[:-1]][owner]           # join every face to its edge's first
-    graph = coo_matrix((np.ones(len(owner)), (first, adjacency.face_items)), shape=(nfaces, nfaces))
-    _, label = connected_components(graph, directed=False)
-    bad = np.ones(len(adjacency.edges), dtype=bool)
-    bad[adjacency.face_count == 2] = False
-    bad[adjacency.misoriented_edges] = True
-    open_label = np.zeros(label.max(initial=-1) + 1, dtype=bool)
-    open_label[label[adjacency.face_items[np.isin(owner, np.flatnonzero(bad))]]] = True
-    return ~open_label[label], label
 
 
 # Method ----------------------------------------------------------------------------------------------------
@@ -590,9 +554,9 @@ class AngularMethod(Method):
         point = isinstance(light, PointLight)
         adjacency = edge_adjacency(mesh)
         sil = silhouette_edges(self.device, adjacency, light)
-        closed, label = closed_faces(adjacency)
-        if point:
-            light_inside(mesh, light, closed, label)
+        closed = adjacency.closed_faces     # in a closed component a blocked ray always crosses a light-facing
+        if point:                           # face, so only those enter the table; elsewhere every face does
+            light_inside(adjacency, light)
         keep = np.where(closed, sil.facing, True)
         keep[adjacency.collapsed_faces] = False
         table_faces = np.flatnonzero(keep)
@@ -622,7 +586,7 @@ class AngularMethod(Method):
         elif self.theta_resolution is not None:
             rows = self.theta_resolution
         else:
-            far_pts = _box_corners(box)
+            far_pts = box_corners(box)
             far = float(np.linalg.norm(far_pts - light.position, axis=1).max()) if point else 0.0
             rows = rows_from_receivers(span, far, box, self.expected_receivers, point)
         if not full:                                   # pad half a row each side: extreme corners get a centre
@@ -783,39 +747,19 @@ class AngularMethod(Method):
         return table_entries(self.device, self.table)
 
 
-def light_inside(mesh: Mesh, light, closed: np.ndarray, label: np.ndarray) -> None:
-    """Raise ``ValueError`` when point ``light`` is inside a closed component (winding number of the
-    component round the light, by the solid angles of its faces, at least 1/2 in size). There no face
-    turns to the light (or all do, wound inwards), the table would be empty or the far wall's, and every
-    receiver would come out lit; the shadow is everything outside the solid, not what this method models.
-    Only components whose bounding box holds the light are summed (1.1 s for 1.2 M faces otherwise)."""
-    if not isinstance(light, PointLight) or not closed.any():
+def light_inside(adjacency, light) -> None:
+    """Raise ``ValueError`` when point ``light`` is inside a closed component of the mesh of ``adjacency``
+    (:meth:`shadowcl.topology.EdgeAdjacency.enclosing_faces`). There no face turns to the light (or all do,
+    wound inwards), the table would be empty or the far wall's, and every receiver would come out lit; the
+    shadow is everything outside the solid, not what this method models."""
+    if not isinstance(light, PointLight):
         return
-    ids = np.flatnonzero(closed)
-    vertex_label = np.full(len(mesh.vertices), -1, dtype=np.int64)
-    vertex_label[mesh.faces[ids]] = label[ids, None]
-    used = vertex_label >= 0
-    vl, side = vertex_label[used], mesh.vertices[used] < light.position
-    # the box holds the light when the component has vertices on both sides of it along every axis
-    n = int(label.max()) + 1
-    holds = np.ones(n, dtype=bool)
-    for axis in range(3):
-        below = np.bincount(vl, weights=side[:, axis], minlength=n)
-        holds &= (below > 0) & (below < np.bincount(vl, minlength=n))
-    for c in np.flatnonzero(holds):
-        part = ids[label[ids] == c]
-        v = mesh.vertices[mesh.faces[part]].astype(np.float64) - light.position
-        a, b, d = v[:, 0], v[:, 1], v[:, 2]
-        la, lb, ld = (np.linalg.norm(x, axis=1) for x in (a, b, d))
-        det = np.einsum("ij,ij->i", a, np.cross(b, d))
-        den = la * lb * ld + np.einsum("ij,ij->i", a, b) * ld + np.einsum("ij,ij->i", a, d) * lb \
-            + np.einsum("ij,ij->i", b, d) * la
-        winding = 2 * np.arctan2(det, den).sum() / (4 * np.pi)      # signed solid angles (Van Oosterom & Strackee)
-        if abs(winding) > 0.5:
-            raise ValueError(f"light: the point light at {light.position.tolist()} is inside a closed solid "
-                             f"({len(part)} faces); everything outside that solid is in its shadow, which "
-                             "the angular table cannot represent (no face of it turns to the light): move the "
-                             "light out or open the mesh")
+    enclosing = adjacency.enclosing_faces(light.position)
+    if len(enclosing):
+        raise ValueError(f"light: the point light at {light.position.tolist()} is inside a closed solid "
+                         f"({len(enclosing)} faces); everything outside that solid is in its shadow, which "
+                         "the angular table cannot represent (no face of it turns to the light): move the "
+                         "light out or open the mesh")
 
 
 def _same_axis(a, b) -> bool:
@@ -834,10 +778,6 @@ def _unit_directions(light, points: np.ndarray) -> np.ndarray:
     d = np.asarray(points, dtype=np.float64) - light.position
     length = np.linalg.norm(d, axis=1)
     return d[length > 0] / length[length > 0, None]
-
-
-def _box_corners(box: np.ndarray) -> np.ndarray:
-    return np.array([[box[i][0], box[j][1], box[k][2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
 
 
 def shadow_counts(scene_or_mesh, lights, points, normals=None, device=None, eps=None, **params) -> np.ndarray:

@@ -43,8 +43,7 @@ method; bench/silhouettes.py measures their time and recall.
 
 from __future__ import annotations
 
-import weakref
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
@@ -54,146 +53,9 @@ from .checks import non_negative_float, positive_float, positive_int
 from .device import get_device
 from .geometry import Mesh
 from .lights import Light, PointLight, check_light
+from .topology import EdgeAdjacency, concave_edges, edge_adjacency
 
 NONMANIFOLD = 2         # kernels/silhouette.cl: SIL_NONMANIFOLD
-NO_FACE = -1            # kernels/silhouette.cl
-MANY_FACES = -2
-
-_CACHE: "weakref.WeakKeyDictionary[Mesh, EdgeAdjacency]" = weakref.WeakKeyDictionary()
-
-
-@dataclass(frozen=True, eq=False)
-class EdgeAdjacency:
-    """The unique undirected edges of a mesh and the faces around each.
-
-    ``vertices`` and ``faces`` are the mesh's own (read-only) arrays; the table keeps them rather than
-    the mesh so that the per-mesh cache, weakly keyed on the mesh, does not keep it alive.
-    ``edges`` (E, 2) int32 vertex ids, first < second, sorted; ``face_offsets`` (E + 1,) and
-    ``face_items`` list every edge's faces (CSR, face ids ascending) and ``face_senses`` whether each
-    runs along the edge (+1, first vertex to second) or against it (-1); ``edge_faces`` (E, 2) holds
-    the first two faces (-1 where a border edge has none). ``collapsed_faces``: faces with a repeated
-    vertex index, left out of the table.
-    """
-
-    vertices: np.ndarray
-    faces: np.ndarray
-    edges: np.ndarray
-    face_offsets: np.ndarray
-    face_items: np.ndarray
-    face_senses: np.ndarray
-    collapsed_faces: np.ndarray
-    _device_buffers: dict = field(default_factory=dict, repr=False)
-
-    @cached_property
-    def face_count(self) -> np.ndarray:
-        """(E,) number of faces on each edge."""
-        return np.diff(self.face_offsets).astype(np.int32)
-
-    @cached_property
-    def edge_faces(self) -> np.ndarray:
-        """(E, 2) int32: each edge's first two faces, -1 for the missing face of a border edge."""
-        return self._first_two(self.face_items, NO_FACE).astype(np.int32)
-
-    @cached_property
-    def edge_senses(self) -> np.ndarray:
-        """(E, 2) int8: the senses of :attr:`edge_faces` (0 for a missing face)."""
-        return self._first_two(self.face_senses, 0).astype(np.int8)
-
-    def _first_two(self, items: np.ndarray, missing) -> np.ndarray:
-        """(E, 2): the first two CSR ``items`` of each edge, ``missing`` where an edge has one."""
-        first = self.face_offsets[:-1]
-        second = items[np.minimum(first + 1, len(items) - 1)]       # clamped: a last edge with one face
-        return np.stack([items[first], np.where(self.face_count > 1, second, missing)], axis=1)
-
-    @cached_property
-    def border_edges(self) -> np.ndarray:
-        """Indices of edges with one face."""
-        return np.flatnonzero(self.face_count == 1)
-
-    @cached_property
-    def nonmanifold_edges(self) -> np.ndarray:
-        """Indices of edges with three or more faces."""
-        return np.flatnonzero(self.face_count > 2)
-
-    @cached_property
-    def misoriented_edges(self) -> np.ndarray:
-        """Indices of two-face edges whose faces run the same way along them (inconsistent winding)."""
-        senses = self.edge_senses
-        return np.flatnonzero((self.face_count == 2) & (senses[:, 0] == senses[:, 1]))
-
-    @property
-    def is_closed_manifold(self) -> bool:
-        """Every edge has exactly two faces."""
-        return bool(np.all(self.face_count == 2))
-
-    def require_manifold(self, what: str = "mesh") -> None:
-        """Raise ``ValueError`` naming ``what`` if an edge has three or more faces or the winding is
-        inconsistent: consumers that orient edges (loops, shadow volumes) call this first."""
-        if len(self.nonmanifold_edges):
-            e = self.nonmanifold_edges[0]
-            raise ValueError(
-                f"{what}: {len(self.nonmanifold_edges)} non-manifold edges (three or more faces), first "
-                f"{self.edges[e].tolist()} with faces {self.faces_of(e).tolist()}; silhouettes need one or two "
-                "faces per edge")
-        if len(self.misoriented_edges):
-            e = self.misoriented_edges[0]
-            raise ValueError(
-                f"{what}: {len(self.misoriented_edges)} edges whose two faces are wound the same way, first "
-                f"{self.edges[e].tolist()} with faces {self.faces_of(e).tolist()}; orient the faces consistently")
-
-    def faces_of(self, edge: int) -> np.ndarray:
-        """The faces around ``edge``."""
-        return self.face_items[self.face_offsets[edge]:self.face_offsets[edge + 1]]
-
-    def device_buffers(self, device) -> tuple:
-        """(vertices, faces, kernel edge faces, edge senses) on ``device``, uploaded once per device."""
-        buffers = self._device_buffers.get(device)
-        if buffers is None:
-            kernel_faces = self.edge_faces.copy()
-            kernel_faces[self.face_count > 2, 1] = MANY_FACES
-            buffers = tuple(device.to_device(a) for a in (self.vertices, self.faces, kernel_faces, self.edge_senses))
-            self._device_buffers[device] = buffers
-        return buffers
-
-
-def _half_edges(faces: np.ndarray, face_ids: np.ndarray):
-    """The three directed edges of each face, face by face: (tails, heads, face ids)."""
-    return faces.reshape(-1), faces[:, [1, 2, 0]].reshape(-1), np.repeat(face_ids, 3)
-
-
-def edge_adjacency(mesh: Mesh) -> EdgeAdjacency:
-    """The :class:`EdgeAdjacency` of ``mesh``, built once per mesh (sort-based, vectorised)."""
-    cached = _CACHE.get(mesh)
-    if cached is None:
-        cached = _build_adjacency(mesh)
-        _CACHE[mesh] = cached
-    return cached
-
-
-def _build_adjacency(mesh: Mesh) -> EdgeAdjacency:
-    faces = mesh.faces.astype(np.int64)
-    collapsed = (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 2] == faces[:, 0])
-    kept = np.flatnonzero(~collapsed)
-    tails, heads, owners = _half_edges(faces[kept], kept)
-    low, high = np.minimum(tails, heads), np.maximum(tails, heads)
-    # Sort half-edges by (low, high, face): equal keys are one edge, its faces ascending.
-    order = np.lexsort((owners, high, low))
-    low, high, owners = low[order], high[order], owners[order]
-    senses = np.where(tails[order] < heads[order], 1, -1).astype(np.int8)
-    first = np.ones(len(low), dtype=bool)
-    first[1:] = (low[1:] != low[:-1]) | (high[1:] != high[:-1])
-    starts = np.flatnonzero(first)
-    return EdgeAdjacency(
-        vertices=mesh.vertices,
-        faces=mesh.faces,
-        edges=np.stack([low[starts], high[starts]], axis=1).astype(np.int32),
-        face_offsets=np.r_[starts, len(low)].astype(np.int64),
-        face_items=owners.astype(np.int32),
-        face_senses=senses,
-        collapsed_faces=np.flatnonzero(collapsed),
-    )
-
-
 class Silhouette:
     """Silhouette edges of one mesh against one light.
 
@@ -614,17 +476,7 @@ class SilhouetteTracker:
 
     def _concave_edges(self) -> np.ndarray:
         """Two-face edges folding inwards by at least ``concave_angle`` degrees (dihedral >= 180 + angle)."""
-        h = self.halves
-        pairs = h.edge_halves[h.edge_halves[:, 1] >= 0]
-        vertices = self.adjacency.vertices.astype(np.float64)
-        tri = vertices[self.adjacency.faces]
-        normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-        normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
-        f0, f1 = pairs[:, 0] // 3, pairs[:, 1] // 3
-        apex1 = self.adjacency.faces[f1, (pairs[:, 1] % 3 + 2) % 3]     # f1's corner off the edge
-        inwards = np.einsum("ij,ij->i", normal[f0], vertices[apex1] - tri[f0, 0]) > 0
-        bend = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", normal[f0], normal[f1]), -1, 1)))
-        return h.edge[pairs[inwards & (bend >= self.concave_angle), 0]]
+        return concave_edges(self.adjacency, min_degrees=self.concave_angle)
 
     # Tracking ---------------------------------------------------------------------------------------
     def _tracking_frame(self) -> "np.ndarray | None":

@@ -52,12 +52,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pyopencl as cl
-from scipy import sparse
-from scipy.sparse import csgraph
 from scipy.spatial import cKDTree
 
 from .checks import check_bounds, positive_int
 from .geometry import Mesh
+from .topology import components
 
 CONNECTIVITIES = (6, 18, 26)
 MAX_RESOLUTION = 1024      # linear voxel indices (i * R + j) * R + k are 32-bit (kernels/voxelize.cl)
@@ -533,8 +532,8 @@ def tessellate(vox: Voxelization) -> LeafMesh:
         return (p * W + u) * W + v
 
     keys, inverse = np.unique(np.concatenate([vkey(cp, cu, cv), vkey(q, mu, mv)]), return_inverse=True)
-    links = sparse.coo_matrix((np.ones(len(linked)), (inverse[linked], inverse[4 * n:])), shape=(len(keys),) * 2)
-    count, label = csgraph.connected_components(links, directed=False)
+    label = components(len(keys), np.stack([inverse[linked], inverse[4 * n:]], axis=1))
+    count = int(label.max(initial=-1)) + 1
     first_sample = np.full(count, 4 * n, np.int64)
     np.minimum.at(first_sample, label[inverse[:4 * n]], np.arange(4 * n))
     vertices = positions[first_sample]
