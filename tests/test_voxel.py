@@ -10,6 +10,7 @@ from shadowcl import voxel
 from shadowcl import voxelize as vz
 from shadowcl.reference import voxel as ref
 from shadowcl.subdivision import SubdivisionSurface
+from shadowcl.testing import grid_patch_table
 
 from conftest import SCENES, require_models
 from test_voxelize import torus_net
@@ -21,7 +22,7 @@ def ground_net(size=3.0, height=-0.6, count=10):
 
 
 def torus_on_ground():
-    return vz.merge_tables([vz.grid_patch_table(torus_net(), True, True), vz.grid_patch_table(ground_net())])
+    return vz.merge_tables([grid_patch_table(torus_net(), True, True), grid_patch_table(ground_net())])
 
 
 BOX = np.array([[-3.0, -3.0, -1.0], [3.0, 3.0, 1.0]])
@@ -107,7 +108,7 @@ def test_without_frame_buffer_same_answers(device, rng, determination):
 
 def test_lit_plane_does_not_shadow_itself(device):
     """Figure 1: a plane under grazing light is lit everywhere (topology-based)."""
-    plane = vz.grid_patch_table(ground_net())
+    plane = grid_patch_table(ground_net())
     for elevation in (2.0, 10.0, 45.0):
         e = np.radians(elevation)
         light = sc.DirectionalLight((np.cos(e), 0.3, -np.sin(e)))

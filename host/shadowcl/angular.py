@@ -112,7 +112,7 @@ from .geometry import Mesh
 from .lights import PointLight, check_light
 from .methods import Method, check_prepare
 from .points import check_points
-from .lightspace import box_corners
+from .lightspace import box_corners, orthonormal_basis
 from .silhouette import edge_adjacency, silhouette_edges, silhouette_loops
 from .topology import components, concave_edges
 
@@ -222,23 +222,16 @@ def angular_frame(light, occluder_points: np.ndarray, prefer_x=None) -> tuple[np
         if np.linalg.norm(px) > 1e-9 and (not point or _pole_clearance(px / np.linalg.norm(px), d) >= POLE_CLEARANCE):
             x_axis = px / np.linalg.norm(px)
     if x_axis is None:
-        basis = _orthonormal_basis(z_axis)
+        basis = np.stack(orthonormal_basis(z_axis))
         x_axis = basis[0]
         if point and len(d):
             proj = d @ basis[:2].T                                   # components in the plane orthogonal to z
             x_axis = np.linalg.eigh(proj.T @ proj)[1][:, 0] @ basis[:2]   # least spread: farthest from them
     if point:                                                        # -Z: the mean direction, orthogonal to X
         z_axis = z_axis - (z_axis @ x_axis) * x_axis
-        z_axis = z_axis / np.linalg.norm(z_axis) if np.linalg.norm(z_axis) > 1e-9 else _orthonormal_basis(x_axis)[0]
+        z_axis = z_axis / np.linalg.norm(z_axis) if np.linalg.norm(z_axis) > 1e-9 else orthonormal_basis(x_axis)[0]
     y_axis = np.cross(z_axis, x_axis)
     return origin, np.stack([x_axis, y_axis, z_axis])
-
-
-def _orthonormal_basis(z: np.ndarray) -> np.ndarray:
-    helper = np.array([1.0, 0, 0]) if abs(z[0]) < 0.9 else np.array([0, 1.0, 0])
-    x = np.cross(helper, z)
-    x /= np.linalg.norm(x)
-    return np.stack([x, np.cross(z, x), z])
 
 
 def row_coordinate(local: np.ndarray, point: bool) -> np.ndarray:

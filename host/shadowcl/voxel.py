@@ -23,7 +23,7 @@ Determination (``determination``):
 
 Both call a sample whose normal faces away from the light shadowed (N . (L - A) <= 0: the paper's
 "definitely in shadow", and DESIGN.md's meaning with normals). Normals are du x dv of the patches:
-outward for counter-clockwise control faces (host/shadowcl/subdivision.py).
+outward for counter-clockwise control faces (host/shadowcl/subdivision/).
 
 Frame buffer or not (``frame_buffer``): with it (section 5.2) prepare runs everything once and
 classify only reads the states, so another view of the same light costs a lookup; without it
