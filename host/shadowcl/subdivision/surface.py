@@ -13,6 +13,7 @@ from ..checks import finite_array, positive_int
 from ..device import get_device
 from ..geometry import Mesh
 from .patches import PatchTable, _bspline_basis, _build_patches, _ptex_sizes
+from .tessellation import tessellation
 
 #: Below this patch parameter (max(u, v)) next to an EV, normals come from float64 host derivatives.
 NEAR_EV = 2.0**-10
@@ -304,7 +305,7 @@ class SubdivisionSurface:
         segments = self._checked_segments(level, segments)
         if segments is None:
             segments = self.default_segments(device=device)
-        face, u, v, triangles, _ = self._tessellation(segments)
+        face, u, v, triangles, _ = tessellation(self.faces, segments)
         return Mesh(self.evaluate(face, u, v, device=device), triangles)
 
     def default_segments(self, tolerance: float = TESSELLATION_TOLERANCE, device=None) -> int:
@@ -323,7 +324,7 @@ class SubdivisionSurface:
         Along the normal only: near an extraordinary vertex uniform parameters give curved cells whose
         centre moves sideways within the tangent plane; that moves no surface and casts no shadow.
         """
-        face, u, v, triangles, centres = self._tessellation(segments)
+        face, u, v, triangles, centres = tessellation(self.faces, segments)
         corners = self.evaluate(face, u, v, device=device).astype(np.float64)
         centre = self.evaluate(*centres, device=device).astype(np.float64)
         normal = self.limit_normals(*centres, device=device).astype(np.float64)
@@ -344,78 +345,3 @@ class SubdivisionSurface:
         if segments % 2 and any(len(f) != 4 for f in self.faces):
             raise ValueError(f"segments: must be even on a control mesh with non-quad faces, got {segments}")
         return segments
-
-    def _tessellation(self, segments: int):
-        """(face, u, v) of every tessellation vertex (shared points once), the (T, 3) triangles (two per
-        cell, cells in order) and (face, u, v) of every cell's centre."""
-        keys: dict[tuple, int] = {}
-        face_of, us, vs = [], [], []
-        triangles, centres = [], []
-
-        def edge_key(x, y, t):
-            if t == 0:
-                return ("v", x)
-            if t == segments:
-                return ("v", y)
-            return ("e", x, y, t) if x < y else ("e", y, x, segments - t)
-
-        for f, corners in enumerate(self.faces):
-            corners = corners.tolist()
-            n = len(corners)
-            size = segments if n == 4 else segments // 2
-            for j in range(1 if n == 4 else n):
-                grid = np.empty((size + 1, size + 1), dtype=np.int64)
-                for b in range(size + 1):
-                    for a in range(size + 1):
-                        if n == 4:
-                            key = self._quad_key(f, corners, a, b, segments, edge_key)
-                        else:
-                            key = self._ngon_key(f, corners, j, a, b, size, segments, edge_key)
-                        index = keys.get(key)
-                        if index is None:
-                            index = keys[key] = len(face_of)
-                            face_of.append(f)
-                            if n != 4 and a == size:
-                                # u = j + 1 would select sub-face j + 1: name the point from there.
-                                u_, v_ = (n, 1.0) if b == size else ((j + 1) % n + b / size, 1.0)
-                            else:
-                                u_, v_ = j + a / size, b / size
-                            us.append(u_)
-                            vs.append(v_)
-                        grid[b, a] = index
-                p00, p10 = grid[:-1, :-1].ravel(), grid[:-1, 1:].ravel()
-                p01, p11 = grid[1:, :-1].ravel(), grid[1:, 1:].ravel()
-                pair = np.stack([np.stack([p00, p10, p11], 1), np.stack([p00, p11, p01], 1)], 1)
-                triangles.append(pair.reshape(-1, 3))
-                cu, cv = np.meshgrid((np.arange(size) + 0.5) / size, (np.arange(size) + 0.5) / size)
-                centres.append(np.stack([np.full(cu.size, f), j + cu.ravel(), cv.ravel()]))
-        centres = np.concatenate(centres, axis=1)
-        return (np.array(face_of), np.array(us, dtype=np.float64), np.array(vs, dtype=np.float64),
-                np.concatenate(triangles), (centres[0].astype(np.int64), centres[1], centres[2]))
-
-    @staticmethod
-    def _quad_key(f, c, a, b, s, edge_key) -> tuple:
-        if b == 0:
-            return edge_key(c[0], c[1], a)
-        if a == s:
-            return edge_key(c[1], c[2], b)
-        if b == s:
-            return edge_key(c[2], c[3], s - a)
-        if a == 0:
-            return edge_key(c[3], c[0], s - b)
-        return ("f", f, a, b)
-
-    @staticmethod
-    def _ngon_key(f, c, j, a, b, h, s, edge_key) -> tuple:
-        n = len(c)
-        if b == 0:
-            return edge_key(c[j], c[(j + 1) % n], a)
-        if a == 0:
-            return edge_key(c[j - 1], c[j], s - b)
-        if a == h and b == h:
-            return ("c", f)
-        if a == h:
-            return ("l", f, j, b)
-        if b == h:
-            return ("l", f, (j - 1) % n, a)
-        return ("f", f, j, a, b)
