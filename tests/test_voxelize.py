@@ -187,6 +187,21 @@ def test_overflow_regrows_to_the_same_result(device):
     assert np.array_equal(tiny.occupied, normal.occupied)
 
 
+def test_counters_that_could_wrap_are_refused(device, monkeypatch):
+    """A level whose slot counters could pass the 32-bit limit is refused with a ValueError naming the
+    resolution before the kernel runs (a wrapped counter would index below the buffers); here the limit is
+    lowered to what the torus's deeper levels need, and a limit it fits in changes nothing."""
+    table = grid_patch_table(torus_net(), True, True)
+    normal = vz.voxelize(device, table, 32, 26)
+    level_items = max(n for _, n, _ in normal.stats["per_level"])
+    monkeypatch.setattr(vz, "COUNTER_MAX", 4 * level_items - 1)
+    with pytest.raises(ValueError, match="resolution: 32 needs .* subpatches .* 32-bit counters"):
+        vz.voxelize(device, table, 32, 26)
+    monkeypatch.setattr(vz, "COUNTER_MAX", 4 * level_items + normal.stats["leaves"])
+    fits = vz.voxelize(device, table, 32, 26, initial_capacity=8)
+    assert np.array_equal(fits.occupied, normal.occupied)
+
+
 def test_without_frame_buffer_same_voxels(device):
     table = grid_patch_table(torus_net(), True, True)
     with_fb = vz.voxelize(device, table, 32, 18, frame_buffer=True)

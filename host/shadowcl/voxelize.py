@@ -63,6 +63,7 @@ MAX_RESOLUTION = 1024      # linear voxel indices (i * R + j) * R + k are 32-bit
 MAX_DEPTH = 24             # kernels/voxelize.cl: subdivision levels (parameters exact in float32)
 LEAF_WORDS = 20            # kernels/voxelize.cl: leaf record
 GROWTH = 1.25              # capacity headroom over a counted overflow
+COUNTER_MAX = 2**31 - 1    # kernels/voxelize.cl's int slot counters: a level that could pass it is refused
 
 
 @dataclass
@@ -263,6 +264,10 @@ def voxelize(device, surface_or_table, resolution: int, connectivity: int = 26,
     per_level = []
     level = 0
     while n_in > 0:
+        # A level adds at most 4 queue slots and one leaf per item: refused before a counter could wrap
+        if 4 * n_in > COUNTER_MAX or nleaves + n_in > COUNTER_MAX:
+            raise ValueError(f"resolution: {resolution} needs {n_in} subpatches at level {level} after {nleaves} "
+                             f"leaves, more than the voxelizer's 32-bit counters hold ({COUNTER_MAX}); use a lower one")
         while True:
             cl.enqueue_copy(queue, counters, np.array([0, nleaves, forced], dtype=np.int32))
             kernel(queue, (n_in,), None, points_g, first_g, levels_g, items_in, np.int32(n_in), items_out,
@@ -274,10 +279,10 @@ def voxelize(device, surface_or_table, resolution: int, connectivity: int = 26,
             # Overflow: grow what ran out (leaves keep their prefix) and rerun the level
             reruns += 1
             if wanted_out > out_cap:
-                out_cap = int(wanted_out * GROWTH)
+                out_cap = min(int(wanted_out * GROWTH), COUNTER_MAX)
                 items_out = dev.empty(16 * out_cap, "voxelization queue")
             if wanted_leaves > leaf_cap:
-                leaf_cap = int(wanted_leaves * GROWTH)
+                leaf_cap = min(int(wanted_leaves * GROWTH), COUNTER_MAX)
                 grown = dev.empty(4 * LEAF_WORDS * leaf_cap, "voxelization leaves")
                 if nleaves:
                     cl.enqueue_copy(queue, grown, leaves_g, byte_count=4 * LEAF_WORDS * nleaves)
