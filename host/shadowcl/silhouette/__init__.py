@@ -45,7 +45,8 @@ Modules: :mod:`.classify` (facing and brute-force edge codes), :mod:`.loops` (cl
 """
 
 from ..topology import EdgeAdjacency, edge_adjacency
-from .classify import NONMANIFOLD, Silhouette, _facing_on_device, face_facing, host_facing, silhouette_edges
+from .classify import _facing_on_device  # noqa: F401 (bench/silhouettes.py launches it)
+from .classify import NONMANIFOLD, Silhouette, face_facing, host_facing, silhouette_edges
 from .loops import Loop, silhouette_loops, vertex_balance
 from .tracking import TRACKER_METHODS, HalfEdges, SilhouetteTracker
 

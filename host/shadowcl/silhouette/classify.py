@@ -6,7 +6,6 @@ from __future__ import annotations
 from functools import cached_property
 
 import numpy as np
-import pyopencl as cl
 
 from ..device import get_device
 from ..geometry import Mesh
