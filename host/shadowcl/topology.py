@@ -41,8 +41,7 @@ from .geometry import Mesh
 
 CONCAVE_SINE = 1e-6     # concave_edges: smallest fold (sine) that counts; see the module doc
 
-NO_FACE = -1            # kernels/silhouette.cl
-MANY_FACES = -2
+NO_FACE = -1            # EdgeAdjacency.edge_faces: the missing face of a border edge (kernels/silhouette.cl too)
 
 _CACHE: "weakref.WeakKeyDictionary[Mesh, EdgeAdjacency]" = weakref.WeakKeyDictionary()
 
@@ -67,7 +66,7 @@ class EdgeAdjacency:
     face_items: np.ndarray
     face_senses: np.ndarray
     collapsed_faces: np.ndarray
-    _device_buffers: dict = field(default_factory=dict, repr=False)
+    _device_buffers: dict = field(default_factory=dict, repr=False)   # silhouette.classify's copies, per device
 
     @cached_property
     def face_count(self) -> np.ndarray:
@@ -178,15 +177,6 @@ class EdgeAdjacency:
         """The faces around ``edge``."""
         return self.face_items[self.face_offsets[edge]:self.face_offsets[edge + 1]]
 
-    def device_buffers(self, device) -> tuple:
-        """(vertices, faces, kernel edge faces, edge senses) on ``device``, uploaded once per device."""
-        buffers = self._device_buffers.get(device)
-        if buffers is None:
-            kernel_faces = self.edge_faces.copy()
-            kernel_faces[self.face_count > 2, 1] = MANY_FACES
-            buffers = tuple(device.to_device(a) for a in (self.vertices, self.faces, kernel_faces, self.edge_senses))
-            self._device_buffers[device] = buffers
-        return buffers
 
 
 def _half_edges(faces: np.ndarray, face_ids: np.ndarray):

@@ -14,6 +14,7 @@ from ..topology import EdgeAdjacency, edge_adjacency
 
 
 NONMANIFOLD = 2         # kernels/silhouette.cl: SIL_NONMANIFOLD
+MANY_FACES = -2         # kernels/silhouette.cl: an edge's second face when it has three or more
 class Silhouette:
     """Silhouette edges of one mesh against one light.
 
@@ -79,7 +80,7 @@ def silhouette_edges(device, adjacency: "EdgeAdjacency | Mesh", light) -> Silhou
         raise TypeError(f"adjacency: expected an EdgeAdjacency or a Mesh, got {type(adjacency).__name__}")
     light = check_light(light)
     facing_g, options = _facing_on_device(device, adjacency, light)
-    _, _, edge_faces_g, edge_senses_g = adjacency.device_buffers(device)
+    _, _, edge_faces_g, edge_senses_g = adjacency_buffers(device, adjacency)
     nfaces, nedges = len(adjacency.faces), len(adjacency.edges)
     codes_g = device.empty(nedges, "edge codes")
     device.kernel("silhouette.cl", "classify_edges", options)(
@@ -103,7 +104,7 @@ def _facing_on_device(device, adjacency: EdgeAdjacency, light) -> tuple:
     point = isinstance(light, PointLight)
     vector = light.position if point else light.direction
     options = (f"-DLIGHT_POINT={int(point)}",)
-    vertices_g, faces_g, _, _ = adjacency.device_buffers(device)
+    vertices_g, faces_g, _, _ = adjacency_buffers(device, adjacency)
     nfaces = len(adjacency.faces)
     facing_g = device.empty(nfaces, "face facing")
     device.kernel("silhouette.cl", "face_facing", options)(
@@ -138,3 +139,16 @@ def _global_size(n: int, group: int = 64) -> tuple:
     """A 1-D global size of at least ``n`` work-items (kernels guard the excess), a multiple of ``group``:
     PoCL otherwise picks a work-group size that divides ``n`` (1 for a prime ``n``), one task each."""
     return (max(-(-n // group), 1) * group,)
+
+
+def adjacency_buffers(device, adjacency: EdgeAdjacency) -> tuple:
+    """(vertices, faces, kernel edge faces, edge senses) of ``adjacency`` on ``device``, uploaded once per
+    device (kept in the table's cache slot); an edge with three or more faces has second face MANY_FACES."""
+    buffers = adjacency._device_buffers.get(device)
+    if buffers is None:
+        kernel_faces = adjacency.edge_faces.copy()
+        kernel_faces[adjacency.face_count > 2, 1] = MANY_FACES
+        buffers = tuple(device.to_device(a) for a in (adjacency.vertices, adjacency.faces, kernel_faces,
+                                                      adjacency.edge_senses))
+        adjacency._device_buffers[device] = buffers
+    return buffers

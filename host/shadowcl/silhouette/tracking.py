@@ -13,7 +13,7 @@ from ..device import get_device
 from ..geometry import Mesh
 from ..lights import PointLight, check_light
 from ..topology import EdgeAdjacency, concave_edges, edge_adjacency
-from .classify import Silhouette, _facing_on_device, _global_size, host_facing, silhouette_edges
+from .classify import Silhouette, _facing_on_device, _global_size, adjacency_buffers, host_facing, silhouette_edges
 
 
 @dataclass(frozen=True, eq=False)
@@ -405,7 +405,7 @@ class _DeviceWalks:
         point = isinstance(light, PointLight)
         vector = [np.float32(c) for c in (light.position if point else light.direction)]
         options = (f"-DLIGHT_POINT={int(point)}",) + self.options
-        vertices_g, faces_g, _, _ = tracker.adjacency.device_buffers(device)
+        vertices_g, faces_g, _, _ = adjacency_buffers(device, tracker.adjacency)
         cl.enqueue_fill_buffer(queue, self.counters_g, np.int32(0), 0, 4 * 5)
         device.kernel("silhouette.cl", "track_previous", options)(
             queue, _global_size(self.nprevious), None, vertices_g, faces_g, self.twin_g, self.found_g[0],
