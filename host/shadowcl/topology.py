@@ -178,7 +178,6 @@ class EdgeAdjacency:
         return self.face_items[self.face_offsets[edge]:self.face_offsets[edge + 1]]
 
 
-
 def _half_edges(faces: np.ndarray, face_ids: np.ndarray):
     """The three directed edges of each face, face by face: (tails, heads, face ids)."""
     return faces.reshape(-1), faces[:, [1, 2, 0]].reshape(-1), np.repeat(face_ids, 3)
