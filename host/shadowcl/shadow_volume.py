@@ -95,6 +95,7 @@ from . import raster
 from .checks import check_bounds, choice, non_negative_float
 from .exact import ExactMethod
 from .geometry import Mesh, bounds_diagonal
+from .lightspace import box_corners
 from .lights import PointLight, check_light
 from .methods import Method, check_prepare
 from .points import check_points
@@ -196,7 +197,7 @@ def build_volume(occluders: Mesh, silhouette: Silhouette, light, receiver_bounds
         return Volume(None, cap, edges, 0.0)
     vertices = occluders.vertices.astype(np.float64)
     faces = occluders.faces[cap].astype(np.int64)
-    corners = np.array(np.meshgrid(*box.T, indexing="ij")).reshape(3, -1).T        # (8, 3) box corners
+    corners = box_corners(box)
     if isinstance(light, PointLight):
         position = light.position
         # Corner by corner, relative to the light: NumPy's reductions over short rows (axis=1 of (C, 3))
