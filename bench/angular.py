@@ -35,7 +35,6 @@ from timing import interleaved, timed, timed_steps  # noqa: E402
 
 import shadowcl as sc  # noqa: E402
 from shadowcl.methods import create_method, default_eps  # noqa: E402
-from shadowcl.angular import shadow_counts  # noqa: E402
 from shadowcl.metrics import mask_error  # noqa: E402
 from shadowcl.render import camera_view, render_report  # noqa: E402
 
@@ -166,7 +165,8 @@ def several_lights(cfg, device) -> dict:
     eps = default_eps(scene.mesh.bounds)
     out = {}
     for name, lights in (("one", [first]), ("two", [first, second])):
-        counted = timed(lambda: shadow_counts(scene.mesh, lights, points, normals, device=device, eps=eps),
+        counted = timed(lambda: sc.shadow_counts(scene.mesh, lights, points, normals, method="angular", device=device,
+                                                  eps=eps),
                              cfg["repeats"])
         counts = counted.result
         truth = sum(sc.shadow_mask(scene.mesh, light, points, normals, eps=eps, device=device).astype(np.int32)

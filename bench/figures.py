@@ -84,15 +84,19 @@ def exact_cells() -> tuple[str, str]:
 
 
 def shadow_map_cells() -> tuple[str, str]:
-    rows = load("shadow-map-defaults.json")["rows"]
+    def worst(doc: dict, resolution: int, bias: str, normals: bool) -> float:
+        return max(r["error_pct"] for r in doc["rows"] if (r["resolution"], r["bias"], r["filter"], r["normals"])
+                   == (resolution, bias, "nearest", normals))
 
-    def errors(resolution: int, filter_: str) -> str:
-        found = {r["scene"]: r["error_percent"] for r in rows
-                 if r["params"] == {"resolution": resolution, "bias": "normal", "filter": filter_}}
-        return " / ".join(f"{found[s]:.3f}" for s in MODELS) + " %"
+    def errors(doc: dict, bias: str) -> str:
+        return "; ".join(f"{res}: {worst(doc, res, bias, False):.2f} / {worst(doc, res, bias, True):.3f} %"
+                         for res in (512, 2048, 4096))
 
-    error = (f"{' / '.join(MODELS)} at 2048 (default: normal offset, nearest): {errors(2048, 'nearest')}; 4096: "
-             f"{errors(4096, 'nearest')}; bilinear at 2048: {errors(2048, 'bilinear')}{src('shadow-map-defaults.json')}")
+    new, bench = load("shadow-map-bias.json"), load("shadow-map-bias-bench.json")
+    count = len({(r["scene"], r["light"]) for r in new["rows"]})
+    error = (f"default (bias \"plane\", nearest), worst of {count} new scenes x lights without / with normals: "
+             f"{errors(new, 'plane')} (normal offset: {errors(new, 'normal')}){src('shadow-map-bias.json')}; "
+             f"worst of bunny / ogre / default / light_inside: {errors(bench, 'plane')}{src('shadow-map-bias-bench.json')}")
     name, run = newest_run(lambda d: len(d["settings"]["sweep"].get("shadow_map", {}).get("resolution", [])) > 2)
     by_case = {}
     for r in run["rows"]:
@@ -109,7 +113,15 @@ def shadow_map_cells() -> tuple[str, str]:
                 errs.append(mine[0]["error_percent"])
         if ratios:
             parts.append(f"{resolution}: {span(ratios)}× ({span(errs)} %)")
-    speed = "time / exact's on the models (error): " + ", ".join(parts) + src(name)
+    def ratios(doc: dict) -> str:
+        r = doc["speed_ratio"]
+        return (f"{r['scene']}: plane / normal offset {r['with']['plane'] / r['with']['normal']:.1f}x with normals, "
+                f"{r['without']['plane'] / r['without']['normal']:.1f}x without; plane / exact "
+                f"{r['with']['plane'] / r['with']['exact']:.1f}x, {r['without']['plane'] / r['without']['exact']:.1f}x")
+
+    speed = (f"query time at 2048, {ratios(new)}{src('shadow-map-bias.json')}; {ratios(bench)}"
+             f"{src('shadow-map-bias-bench.json')}; run.py's default of its day, time / exact's on the models "
+             "(error): " + ", ".join(parts) + src(name))
     return error, speed
 
 
@@ -176,7 +188,9 @@ METHOD_ROWS = [  # method, paper, status (static prose), and the function giving
     ("`exact`", "Lai & Cheng 2007 §4.2 on the original triangles: light-space lists built on the device with atomics "
      "(an irregular Z-buffer) + the watertight ray/triangle test of Woop et al. 2013 (`test=\"dot5\"`: the paper's "
      "5-dot-product test)", "done", exact_cells),
-    ("`shadow_map`", "Williams 1978: light-view depth from the raster kernel, constant / slope / normal-offset bias, "
+    ("`shadow_map`", "Williams 1978: light-view depth and triangle ids from the raster kernel; bias \"plane\" "
+     "(default, no normals needed: the texel's triangle plane at the receiver's ray and exact tests of the 3 x 3 "
+     "texels' triangles, after Dou et al. 2014's adaptive depth bias), constant / slope / normal-offset bias, "
      "nearest / bilinear / PCF, dither, post-filter", "done", shadow_map_cells),
     ("`voxel`", "Lai & Cheng 2007: Catmull-Clark limit surfaces voxelized by breadth-first parameter-space subdivision "
      "on the device into a 2-bit cubic frame buffer; topology-based (sorted subpatch lists on the light-space lists + "

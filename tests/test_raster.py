@@ -204,11 +204,16 @@ def test_depth_map_is_bit_identical_to_rasterize_depth(device, rng, scene):
     else:
         mesh, view = random_soup(rng, scene)
     depth = raster.depth_map(device, mesh, view)
-    assert depth.view is view and depth.shape == (view.height, view.width)
-    expected = raster.rasterize(device, mesh, view).depth
+    assert depth.view is view and depth.shape == (view.height, view.width) and depth.triangle is None
+    expected = raster.rasterize(device, mesh, view)
     got = depth.read()
     assert got.dtype == np.float32 and got.any()
-    np.testing.assert_array_equal(got.view(np.uint32), expected.view(np.uint32))
+    np.testing.assert_array_equal(got.view(np.uint32), expected.depth.view(np.uint32))
+    # with triangle ids (the shadow map's plane test): the same depths and rasterize's ids, on the device
+    with_ids = raster.depth_map(device, mesh, view, triangles=True)
+    np.testing.assert_array_equal(with_ids.read().view(np.uint32), expected.depth.view(np.uint32))
+    ids = device.from_device(with_ids.triangle, depth.shape, np.int32)
+    np.testing.assert_array_equal(ids, expected.triangle)
 
 
 # Shared edges: every pixel drawn exactly once -----------------------------------------------------

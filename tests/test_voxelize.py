@@ -245,10 +245,29 @@ def test_grid_bounds_fix_the_grid(device):
         vz.voxelize(device, table, 40, 26, grid_bounds=box * 0.1)
 
 
+def test_grid_bounds_need_only_hold_the_control_vertices(device, rng):
+    """An open control mesh's patch table extrapolates boundary points beyond its vertices; a grid box
+    holding every control vertex is accepted (with a NumPy integer connectivity) and holds the limit surface."""
+    m, n = 5, 4
+    x, z = np.meshgrid(np.arange(m, dtype=float), np.arange(n, dtype=float), indexing="ij")
+    vertices = np.stack([x, rng.uniform(0, 1, x.shape), z], axis=-1).reshape(-1, 3)
+    faces = [[i * n + j, i * n + j + 1, (i + 1) * n + j + 1, (i + 1) * n + j] for i in range(m - 1) for j in range(n - 1)]
+    surface = SubdivisionSurface(vertices, faces)
+    box = np.stack([vertices.min(axis=0), vertices.max(axis=0)])
+    points = surface.patch_table(device).points
+    assert np.any(points < box[0]) or np.any(points > box[1])     # what the check used to test
+    vox = vz.voxelize(device, surface, 32, np.int64(18), grid_bounds=box)
+    limit = surface.tessellate(segments=8).vertices
+    assert np.all(limit >= vox.origin) and np.all(limit <= vox.origin + vox.voxel_size * 32)
+    with pytest.raises(ValueError, match="grid_bounds: the box must contain every control point"):
+        vz.voxelize(device, surface, 32, grid_bounds=box * 0.5)
+
+
 @pytest.mark.parametrize("call, error, match", [
     (lambda d, t: vz.voxelize(d, t, 0), ValueError, "resolution"),
     (lambda d, t: vz.voxelize(d, t, 2048), ValueError, "resolution"),
     (lambda d, t: vz.voxelize(d, t, 16, connectivity=8), ValueError, "connectivity"),
+    (lambda d, t: vz.voxelize(d, t, 16, connectivity=26.0), ValueError, "connectivity: expected one of 6, 18, 26, got 26.0"),
     (lambda d, t: vz.voxelize(d, "torus", 16), TypeError, "surface"),
     (lambda d, t: vz.voxelize(d, vz.Patches(t.points * np.nan, t.first, t.levels, t.neighbors), 16), ValueError, "finite"),
     (lambda d, t: vz.voxelize(d, vz.Patches(t.points[:10], t.first, t.levels, t.neighbors), 16), ValueError, "beyond"),

@@ -76,7 +76,7 @@ Pipeline (kernels/angular.cl):
    eq. 7's maximum run length; that makes it exact: runs give the per-pixel answer bit for bit. For the
    rows to follow the scan lines, ``classify_view`` puts the pole on the camera's right axis (the
    paper's frame, XY parallel to the screen) and picks the rows from the image (:meth:`view_rows`).
-5. **Several lights** (section 11.1): one table per light, :func:`shadow_counts`. **Light inside the
+5. **Several lights** (section 11.1): one table per light, ``sc.shadow_counts(..., method="angular")``. **Light inside the
    scene** (section 11.2): the rows are half-planes round the pole axis, so the whole sphere but the
    pole is covered by one table whose rows wrap round at +-pi; no hemisphere split is needed, and rows
    are uniform in theta (the paper's finer rows near +-pi/2 compensate its tan-based coordinates, which
@@ -109,7 +109,7 @@ import numpy as np
 
 from .checks import choice, flag, optional_int, positive_int, vector3
 from .geometry import Mesh
-from .lights import PointLight, check_light
+from .lights import PointLight
 from .methods import Method, check_prepare
 from .points import check_points
 from .lightspace import box_corners, orthonormal_basis
@@ -785,25 +785,3 @@ def _unit_directions(light, points: np.ndarray) -> np.ndarray:
     d = np.asarray(points, dtype=np.float64) - light.position
     length = np.linalg.norm(d, axis=1)
     return d[length > 0] / length[length > 0, None]
-
-
-def shadow_counts(scene_or_mesh, lights, points, normals=None, device=None, eps=None, **params) -> np.ndarray:
-    """Section 11.1: int32 (N,) number of ``lights`` shadowing each of ``points`` -- one table per light,
-    on one method instance (``sc.prepare(..., method="angular")`` prepared again for each light)."""
-    from .shadows import prepare
-
-    lights = list(lights) if isinstance(lights, (list, tuple)) else [lights]
-    if not lights:
-        raise ValueError("lights: expected at least one light")
-    lights = [check_light(light) for light in lights]
-    receivers = check_points(points, normals)
-    counts = np.zeros(len(receivers), dtype=np.int32)
-    if len(receivers) == 0:
-        return counts
-    params.setdefault("expected_receivers", len(receivers))
-    shadows = prepare(scene_or_mesh, lights[0], "angular", receivers.bounds, device, eps, **params)
-    for index, light in enumerate(lights):
-        if index:
-            shadows.relight(light)
-        counts += shadows.mask(receivers)
-    return counts

@@ -22,9 +22,13 @@ import numpy as np
 import pyopencl as cl
 
 from . import kernels as _kernel_package
+from .checks import available_host_bytes, check_memory
 
 # kernels/ is installed as the package shadowcl.kernels (see setup.cfg), editable or not.
 KERNEL_DIR = Path(_kernel_package.__file__).resolve().parent
+# Buffers from this size up are checked against the host's free memory on a CPU device (reading it costs
+# ~20 us, nothing beside allocating and touching this much).
+HOST_CHECKED_BYTES = 64 << 20
 
 NO_PLATFORM_MESSAGE = (
     "shadowcl found no OpenCL platform. Install PoCL's CPU driver with "
@@ -196,6 +200,9 @@ class Device:
                 f"{what}: needs {nbytes / 2**20:.0f} MiB in one buffer but {self.name} allows at most "
                 f"{self.max_alloc_bytes / 2**20:.0f} MiB; lower the resolution"
             )
+        if nbytes >= HOST_CHECKED_BYTES and self.cl_device.type & cl.device_type.CPU:
+            # a CPU device's buffers are host memory, and PoCL crashes (not fails) when the host runs out
+            check_memory(what, f"a {nbytes / 2**20:.0f} MiB buffer", nbytes, available_host_bytes(), "the host")
         return cl.Buffer(self.context, cl.mem_flags.READ_WRITE, nbytes)
 
     def scratch(self, key: str, nbytes: int) -> cl.Buffer:

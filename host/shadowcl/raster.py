@@ -89,11 +89,13 @@ class ZBuffer:
 @dataclass(frozen=True, eq=False)
 class DepthMap:
     """A view's nearest depths left on the device: ``buffer`` holds (H, W) float32 row-major, 0 = empty,
-    1 = nearest, bit for bit what :func:`rasterize` reads back as ``ZBuffer.depth``."""
+    1 = nearest, bit for bit what :func:`rasterize` reads back as ``ZBuffer.depth``; ``triangle``, when
+    asked for, (H, W) int32 the visible triangle's index (-1 = empty), as ``ZBuffer.triangle``."""
 
     buffer: cl.Buffer = field(repr=False)
     view: View
     device: Device = field(repr=False)
+    triangle: cl.Buffer | None = field(default=None, repr=False)
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -172,15 +174,27 @@ def rasterize(device: Device, mesh: Mesh, view: View) -> ZBuffer:
                    depth.buffer, triangle_dev)
 
 
-def depth_map(device: Device, mesh: Mesh, view: View) -> DepthMap:
-    """Only the nearest depth of every pixel of ``mesh`` seen by ``view``, left on the device.
+def depth_map(device: Device, mesh: Mesh, view: View, triangles: bool = False) -> DepthMap:
+    """The nearest depth of every pixel of ``mesh`` seen by ``view``, left on the device.
 
-    The same triangle setup and depth pass as :func:`rasterize` (bit-identical depths) without the
-    triangle-id pass and without reading anything back: what a light's shadow map needs. Raises as
-    :func:`rasterize` does.
+    The same triangle setup and depth pass as :func:`rasterize` (bit-identical depths) without reading
+    anything back: what a light's shadow map needs. ``triangles=True`` adds :func:`rasterize`'s
+    triangle-id pass (bit-identical ids, also left on the device). Raises as :func:`rasterize` does.
     """
     _check(mesh, view)
-    return _depth_pass(device, _setup(device, mesh, view), view)
+    setup = _setup(device, mesh, view)
+    depth = _depth_pass(device, setup, view)
+    if not triangles:
+        return depth
+    triangle_dev = _image(device, view, _EMPTY, "triangle buffer")
+    _draw(device, "raster_triangle", setup, view, depth.buffer, triangle_dev)
+    return DepthMap(depth.buffer, view, device, triangle_dev)
+
+
+def mesh_buffers(device: Device, mesh: Mesh, origin: np.ndarray) -> tuple[cl.Buffer, cl.Buffer]:
+    """``mesh``'s vertices relative to ``origin`` (float32, 3 per vertex) and faces (int32, 3 per face) on
+    the device: the buffers the raster passes drew from (uploaded once per mesh, device and origin)."""
+    return _geometry(device, mesh, origin)
 
 
 def coverage_count(device: Device, mesh: Mesh, view: View) -> np.ndarray:

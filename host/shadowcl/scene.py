@@ -33,22 +33,41 @@ A shape table holds exactly one shape key, and optionally ``scale`` (a number or
 ``rotate`` (degrees about the world x, then y, then z axis) and ``translate``, applied in that order:
 scale, rotate, translate. The shape keys (primitive parameters are optional, defaults shown)::
 
-    sphere = { radius = 1, segments = 32 }            # segments round up to a multiple of 4
+    sphere = { radius = 1, segments = 32 }            # segments round up to a multiple of 4, at most 2048
     box = { size = [1, 1, 1], center = false }        # size may be one number; corner at the origin
-    cylinder = { height = 1, radius = 1, radius_top = 1, segments = 32, center = false }
+    cylinder = { height = 1, radius = 1, radius_top = 1, segments = 32, center = false }   # segments <= 524289
                                                       # along z from z = 0; radius_top defaults to
                                                       # radius, 0 makes a cone; stand it up along y
                                                       # with rotate = [-90, 0, 0]
     union = [shape, ...]                              # CSG: each item is a shape table (primitive
     difference = [shape, minus, ...]                  # or CSG, with its own transforms); TOML's
-    intersection = [shape, ...]                       # [[objects.union]] tables work too
+    intersection = [shape, ...]                       # [[objects.union]] tables work too; nested at
+                                                      # most 64 deep
     mesh = "models/bunny.obj"                         # OBJ/PLY/STL/OFF, relative to the scene file
                                                       # (~ and absolute paths allowed)
     triangles = { vertices = [[x, y, z], ...], faces = [[i, j, k], ...] }
     subdivision = "models/cage.obj"                   # a Catmull-Clark control mesh (OBJ, any polygons)
     subdivision = { vertices = [[x, y, z], ...], faces = [[i, j, k, l], ...] }   # inline control mesh
     tessellation = 8                                  # subdivision only: segments per control edge
-                                                      # (default: SubdivisionSurface.default_segments)
+                                                      # (default: SubdivisionSurface.default_segments;
+                                                      # at most MAX_TESSELLATION_CELLS cells)
+
+For sun-hours studies (``shadowcl sun-hours``, :mod:`shadowcl.sun`), optionally::
+
+    [sun]                              # the site and the period: Scene.sun, a dict of these keys
+    latitude = 48.85                   # degrees, within ±90 (north positive)
+    longitude = 2.35                   # degrees, within ±180 (east positive)
+    start = "2026-01-01"               # a TOML date or datetime, or a string pandas reads
+    end = "2027-01-01"                 # excluded
+    step = "1h"                        # a pandas time step
+    timezone = "UTC"                   # of start and end when they carry none (optional, default UTC)
+    north = [0, 0, -1]                 # the scene's north (optional, default -z; up is +y)
+
+    [[sensors]]                        # grids of sensor points: Scene.sensors, a list of dicts
+    name = "roofs"
+    objects = ["tower", "hall"]        # names of objects whose upward-facing triangles carry the grid
+    spacing = 1.0                      # grid step in scene units (a square grid seen from above)
+    offset = 0.01                      # along the face's normal (optional, default 0.01)
 
 A ``subdivision`` object is a :class:`~shadowcl.subdivision.SubdivisionSurface` (its transform applied
 to the control points, which moves the limit surface exactly); it is listed in :attr:`Scene.surfaces`
@@ -68,6 +87,7 @@ list of allowed keys.
 
 from __future__ import annotations
 
+import datetime
 import operator
 import tomllib
 from contextlib import contextmanager
@@ -80,10 +100,23 @@ from manifold3d import Manifold
 from .checks import positive_int, vector3
 from .geometry import Mesh, bounds_diagonal
 from .lights import DirectionalLight, PointLight
+from .meshio import path_argument
 from .subdivision import SubdivisionSurface
 from .views import Camera
 
 DEFAULT_SEGMENTS = 32
+# Most triangles one sphere or cylinder may have: manifold3d's 2048-segment sphere (2,097,152 triangles)
+# took 5 s and 0.8 GB here; 2e9 segments crash it. A sphere of n segments has n^2 / 2 triangles, a
+# cylinder 4 n - 4.
+MAX_PRIMITIVE_TRIANGLES = 1 << 21
+MAX_SPHERE_SEGMENTS = int(np.sqrt(2 * MAX_PRIMITIVE_TRIANGLES))
+MAX_CYLINDER_SEGMENTS = (MAX_PRIMITIVE_TRIANGLES + 4) // 4
+# ... and all of a scene file's primitives together (CSG keeps its operands until it combines them).
+MAX_SCENE_PRIMITIVE_TRIANGLES = 1 << 23
+# Largest image side a scene may ask renderers for (render.MAX_SIDE is this).
+MAX_RENDER_SIDE = 16384
+# Deepest CSG nesting read from a file: far beyond any real scene, well within Python's recursion limit.
+MAX_CSG_DEPTH = 64
 DEFAULT_FOV = 45.0
 # From the scene's centre towards the default camera: to the right (+x), above (+y), in front (+z).
 DEFAULT_VIEW_DIRECTION = (1.0, 0.8, 1.4)
@@ -120,6 +153,9 @@ class Scene:
         path: the scene file, or None for a scene built in code.
     """
 
+    sun: dict | None = None     # a scene file's [sun] table, checked (module docstring)
+    sensors: tuple = ()         # its [[sensors]] tables, checked: dicts of name, objects, spacing, offset
+
     def __init__(self, objects, lights, camera=None, name="scene", colors=None, render_size=None, path=None):
         """``objects`` is a list of ``(name, Mesh)``, ``(name, SubdivisionSurface)`` or
         ``(name, SubdivisionSurface, segments)``; ``colors`` optionally one RGB (or None) each."""
@@ -141,12 +177,20 @@ class Scene:
     @classmethod
     def load(cls, path) -> "Scene":
         """Read a scene file (format in the module docstring); errors name the file and key path."""
-        path = Path(path)
+        path = path_argument("path", path)
         with _located(str(path)):
             if not path.is_file():
                 raise FileNotFoundError("no such scene file")
-            with path.open("rb") as file:
-                document = tomllib.load(file)
+            try:
+                data = path.read_bytes()
+            except OSError as error:
+                raise ValueError(f"cannot be read ({error.strerror})") from None
+            try:
+                document = tomllib.loads(data.decode("utf-8"))
+            except UnicodeDecodeError as error:
+                raise ValueError(f"not UTF-8 text (TOML must be): byte {error.start}") from None
+            except RecursionError:
+                raise ValueError("arrays or inline tables nested too deep for the TOML parser") from None
             return _read_scene(_Table(document, ""), path)
 
     @property
@@ -202,10 +246,11 @@ def _tessellated(objects) -> tuple:
     out, surfaces = [], []
     for index, item in enumerate(objects):
         if isinstance(item, tuple) and len(item) in (2, 3) and isinstance(item[1], SubdivisionSurface):
-            if len(item) == 3 and item[2] is not None:
-                mesh = item[1].tessellate(segments=positive_int(f"objects[{index}] segments", item[2]))
-            else:
-                mesh = item[1].tessellate()
+            with _located(f"objects[{index}]"):   # e.g. too many segments for the control mesh
+                if len(item) == 3 and item[2] is not None:
+                    mesh = item[1].tessellate(segments=positive_int("segments", item[2]))
+                else:
+                    mesh = item[1].tessellate()
             surfaces.append((item[0], item[1]))
             item = (item[0], mesh)
         out.append(item)
@@ -245,7 +290,8 @@ def _rgb(name: str, value) -> np.ndarray:
 def _checked_size(size) -> tuple[int, int]:
     if not (isinstance(size, (list, tuple)) and len(size) == 2):
         raise TypeError(f"render_size: expected (width, height), got {size!r}")
-    return positive_int("render_size[0]", size[0]), positive_int("render_size[1]", size[1])
+    return (positive_int("render_size[0]", size[0], maximum=MAX_RENDER_SIDE),
+            positive_int("render_size[1]", size[1], maximum=MAX_RENDER_SIDE))
 
 
 # ---- reading scene files ----
@@ -319,13 +365,13 @@ class _Table:
             raise self.invalid(key, f"must be positive, got {value}")
         return float(value)
 
-    def integer(self, key: str, default=_REQUIRED, minimum: int = 1) -> int:
+    def integer(self, key: str, default=_REQUIRED, minimum: int = 1, maximum: int | None = None) -> int:
         if self._absent(key, default):
             return default
         value = self.data[key]
         if not isinstance(value, int) or isinstance(value, bool):
             raise TypeError(f"{self.path(key)}: expected an integer, got {_toml_type(value)}")
-        return positive_int(self.path(key), value, minimum=minimum)
+        return positive_int(self.path(key), value, minimum=minimum, maximum=maximum)
 
     def flag(self, key: str, default=_REQUIRED) -> bool:
         return self._typed(key, default, bool, "true or false")
@@ -368,7 +414,7 @@ class _Table:
 def _sphere(params: _Table):
     params.allow_only(("radius", "segments"))
     radius = params.number("radius", 1.0, positive=True)
-    return Manifold.sphere(radius, params.integer("segments", DEFAULT_SEGMENTS, minimum=3))
+    return Manifold.sphere(radius, params.integer("segments", DEFAULT_SEGMENTS, minimum=3, maximum=MAX_SPHERE_SEGMENTS))
 
 
 def _box(params: _Table):
@@ -389,7 +435,7 @@ def _cylinder(params: _Table):
         params.number("height", 1.0, positive=True),
         radius,
         radius_top,
-        params.integer("segments", DEFAULT_SEGMENTS, minimum=3),
+        params.integer("segments", DEFAULT_SEGMENTS, minimum=3, maximum=MAX_CYLINDER_SEGMENTS),
         params.flag("center", False),
     )
 
@@ -402,11 +448,17 @@ SUBDIVISION_KEY = "subdivision"  # a Catmull-Clark control mesh, kept as a Subdi
 SHAPE_KEYS = tuple(PRIMITIVES) + tuple(CSG_OPERATORS) + RAW_KEYS + (SUBDIVISION_KEY,)
 TRANSFORM_KEYS = ("scale", "rotate", "translate")
 OBJECT_KEYS = ("name", "color") + SHAPE_KEYS + TRANSFORM_KEYS + ("tessellation",)
-SCENE_KEYS = ("name", "render", "camera", "lights", "objects")
+SCENE_KEYS = ("name", "render", "camera", "lights", "objects", "sun", "sensors")
+SUN_KEYS = ("latitude", "longitude", "start", "end", "step", "timezone", "north")
+SENSOR_KEYS = ("name", "objects", "spacing", "offset")
 
 
 def _read_scene(root: _Table, path: Path) -> Scene:
     root.allow_only(SCENE_KEYS)
+    triangles = _primitive_triangles(root.data.get("objects"))
+    if triangles > MAX_SCENE_PRIMITIVE_TRIANGLES:
+        raise root.invalid("objects", f"the spheres and cylinders would make about {triangles:,} triangles; "
+                                      f"at most {MAX_SCENE_PRIMITIVE_TRIANGLES:,} in one scene")
     objects, colors = [], []
     for table in root.tables("objects"):
         name, shape, color = _read_object(table, path.parent)
@@ -414,7 +466,7 @@ def _read_scene(root: _Table, path: Path) -> Scene:
         colors.append(color)
     camera = root.table("camera", None)
     render = root.table("render", None)
-    return Scene(
+    scene = Scene(
         objects,
         [_read_light(table) for table in root.tables("lights")],
         camera=None if camera is None else _read_camera(camera),
@@ -423,6 +475,63 @@ def _read_scene(root: _Table, path: Path) -> Scene:
         render_size=None if render is None else _read_render_size(render),
         path=path,
     )
+    sun = root.table("sun", None)
+    scene.sun = None if sun is None else _read_sun(sun)
+    names = [name for name, _ in scene.objects]
+    scene.sensors = tuple(_read_sensors(table, names) for table in root.tables("sensors"))
+    return scene
+
+
+def _read_sun(table: _Table) -> dict:
+    table.allow_only(SUN_KEYS)
+    sun = {"latitude": table.number("latitude"), "longitude": table.number("longitude")}
+    for key, limit in (("latitude", 90), ("longitude", 180)):
+        if abs(sun[key]) > limit:
+            raise table.invalid(key, f"must be within ±{limit} degrees, got {sun[key]}")
+    for key in ("start", "end"):
+        value = table.raw(key)
+        if not isinstance(value, (str, datetime.date)):
+            raise TypeError(f"{table.path(key)}: expected a date, a datetime or a string, got {_toml_type(value)}")
+        sun[key] = value
+    sun["step"] = table.text("step", "1h")
+    sun["timezone"] = table.text("timezone", "UTC")
+    sun["north"] = table.vector("north", (0.0, 0.0, -1.0), nonzero=True)
+    return sun
+
+
+def _read_sensors(table: _Table, object_names: list) -> dict:
+    table.allow_only(SENSOR_KEYS)
+    objects = table.raw("objects")
+    if not (isinstance(objects, list) and objects and all(isinstance(name, str) for name in objects)):
+        raise TypeError(f"{table.path('objects')}: expected a non-empty array of object names, got {objects!r}")
+    unknown = sorted(set(objects) - set(object_names))
+    if unknown:
+        raise table.invalid("objects", f"no object named {', '.join(unknown)}; objects: {', '.join(object_names)}")
+    offset = table.number("offset", 0.01)
+    if offset < 0:
+        raise table.invalid("offset", f"must not be negative, got {offset}")
+    return {"name": table.text("name", "sensors"), "objects": objects,
+            "spacing": table.number("spacing", positive=True), "offset": offset}
+
+
+def _primitive_triangles(value) -> int:
+    """Triangles the spheres and cylinders anywhere in a TOML value would make, counted before any is
+    built; a bad ``segments`` counts nothing here (reading the shape names it)."""
+    total, stack = 0, [value]
+    while stack:   # a loop, not recursion: [[objects.union.union...]] tables nest without bound
+        item = stack.pop()
+        if isinstance(item, list):
+            stack.extend(item)
+        elif isinstance(item, dict):
+            for key, inner in item.items():
+                segments = inner.get("segments", DEFAULT_SEGMENTS) if isinstance(inner, dict) else None
+                limit = {"sphere": MAX_SPHERE_SEGMENTS, "cylinder": MAX_CYLINDER_SEGMENTS}.get(key, 0)
+                if isinstance(segments, int) and 3 <= segments <= limit:
+                    rounded = -(-segments // 4) * 4   # manifold3d rounds a sphere's segments up to a multiple of 4
+                    total += rounded ** 2 // 2 if key == "sphere" else 4 * segments - 4
+                else:
+                    stack.append(inner)
+    return total
 
 
 def _read_camera(table: _Table) -> Camera:
@@ -446,7 +555,7 @@ def _read_light(table: _Table):
 
 def _read_render_size(table: _Table) -> tuple[int, int]:
     table.allow_only(("width", "height"))
-    return table.integer("width"), table.integer("height")
+    return table.integer("width", maximum=MAX_RENDER_SIDE), table.integer("height", maximum=MAX_RENDER_SIDE)
 
 
 def _read_object(table: _Table, base_dir: Path) -> tuple[str, "Mesh | tuple", np.ndarray | None]:
@@ -477,14 +586,19 @@ def _shape_key(table: _Table) -> str:
 def _build_shape(table: _Table, kind: str, base_dir: Path) -> Mesh:
     """The transformed mesh of a shape table whose shape key is ``kind``."""
     if kind == "mesh":
-        return _mesh_file(table, base_dir).transformed(_transform_matrix(table))
-    if kind == "triangles":
-        return _inline_triangles(table.table("triangles")).transformed(_transform_matrix(table))
-    solid = _build_solid(table, kind)
-    if solid.is_empty():
-        raise ValueError(f"{table.where}: the shape is empty (manifold3d status: {solid.status().name})")
-    result = solid.to_mesh64()
-    return Mesh(np.asarray(result.vert_properties)[:, :3], np.asarray(result.tri_verts))
+        mesh = _mesh_file(table, base_dir)
+    elif kind == "triangles":
+        mesh = _inline_triangles(table.table("triangles"))
+    else:
+        solid = _build_solid(table, kind)
+        if solid.is_empty():
+            raise ValueError(f"{table.where}: the shape is empty (manifold3d status: {solid.status().name})")
+        result = solid.to_mesh64()
+        with _located(table.where):   # e.g. a size beyond float32
+            return Mesh(np.asarray(result.vert_properties)[:, :3], np.asarray(result.tri_verts))
+    matrix = _transform_matrix(table)
+    with _located(table.where):       # e.g. a scale that takes the mesh beyond float32
+        return mesh.transformed(matrix)
 
 
 def _mesh_file(table: _Table, base_dir: Path) -> Mesh:
@@ -519,12 +633,14 @@ def _inline_triangles(table: _Table) -> Mesh:
         return Mesh(vertices, faces)
 
 
-def _build_solid(table: _Table, kind: str):
-    """The transformed manifold3d solid of a primitive or CSG shape table."""
+def _build_solid(table: _Table, kind: str, depth: int = 0):
+    """The transformed manifold3d solid of a primitive or CSG shape table ``depth`` CSG levels down."""
     if kind in PRIMITIVES:
         solid = PRIMITIVES[kind](table.table(kind))
     elif kind in CSG_OPERATORS:
-        solid = _combine(table, kind)
+        if depth >= MAX_CSG_DEPTH:
+            raise table.invalid(kind, f"CSG nested more than {MAX_CSG_DEPTH} deep")
+        solid = _combine(table, kind, depth + 1)
     else:
         raise table.invalid(
             kind, "inline triangles, mesh files and subdivision surfaces cannot be used in CSG "
@@ -533,14 +649,14 @@ def _build_solid(table: _Table, kind: str):
     return solid.transform(_transform_matrix(table)[:3])
 
 
-def _combine(table: _Table, operation: str):
+def _combine(table: _Table, operation: str, depth: int):
     items = table.tables(operation)
     if not items:
         raise table.invalid(operation, "expected at least one shape table")
     solids = []
     for item in items:
         item.allow_only(SHAPE_KEYS + TRANSFORM_KEYS)
-        solids.append(_build_solid(item, _shape_key(item)))
+        solids.append(_build_solid(item, _shape_key(item), depth))
     return reduce(CSG_OPERATORS[operation], solids)
 
 

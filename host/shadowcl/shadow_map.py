@@ -4,8 +4,34 @@
 (:func:`shadowcl.lightspace.fit_views`: orthographic for a directional light, one perspective view
 for a point light outside the receivers' box whose frustum stays within 120 degrees, else a cube of six
 faces), makes each window square, and draws each view's depth map with :func:`shadowcl.raster.depth_map`
-(one rasterizer, two views; the maps stay on the device). ``classify`` runs ``kernels/shadow_map.cl``:
-each receiver is transformed into light space and compared with the stored depth.
+(one rasterizer, two views; the maps stay on the device; with the default bias "plane" each texel also
+keeps the id of the triangle the light sees there). ``classify`` runs ``kernels/shadow_map.cl``: each
+receiver is transformed into light space and compared with what the map stored there.
+
+The default bias, "plane", needs no normals. Dou, Yan, Kerzner, Dai & Wyman (adaptive depth bias,
+I3D 2014 / JCGT 3(4)) observe that acne comes from comparing the receiver with a depth sampled at the
+texel's centre, not at the receiver's own position: they intersect the light's ray through the texel
+centre with the receiver's tangent plane (the "potential shadow caster") and bias by the depth
+difference, plus an epsilon for depth precision. That needs the receiver's normal. Receiver-plane
+depth bias (Isidoro 2006; Schüler 2005) moves the comparison to the receiver's exact position by
+extrapolating the depth over a plane. "plane" does both with the plane the map itself holds: the
+raster pass resolves a triangle id per texel, so the comparison is made against the plane of the
+texel's own triangle, continued to the receiver's exact ray, in the scene's frame (plane distances
+are differences of positions near the maps' origin, and the map's perspective depth runs to a finite
+far plane: a point light 1e6 scene sizes away still ranks the surfaces). A receiver on the occluding
+surface is then on the plane, lit at any angle: only curvature within the texel needs a bias
+(:data:`PLANE_CURVATURE` texels per texel of the filter's reach, plus 0.5 texel, plus eps and float32
+rounding). Because the triangle is known, the test can be exact as well: near a silhouette the
+texel's triangle may not be the one above the receiver, so nearest lookup tests the receiver's ray
+exactly (the watertight test of ``kernels/ray_triangle.h``) against the triangles of the 3 x 3 texels
+around, which removes most edge aliasing; the plane only stands for the surface where the ray passes
+beside the stored triangle (triangles smaller than a texel are not all in the map). When a texel's
+triangle is met by the ray at the receiver's own position (without normals; with normals, facing the
+light, at or behind it), the light sees the receiver's surface there, and the plane is not used: a
+plane continued across a convex edge (a box's top over its side) would shadow the side. What was left
+out: the paper's epsilon for depth precision (no depth is compared), and the normal offset with this
+bias (it moved shadow edges: on a sphere on a floor, 105 against 42 wrong of 250 k with normals).
+Details and the measurement against the other biases: "Defaults" below.
 
 Cube faces: a face whose frustum the receiver bounds do not meet is not drawn by ``prepare`` (a light
 above a floor skips at least its upward face). The rule that keeps ``classify`` right for any point:
@@ -31,7 +57,10 @@ The paper's remedies, as parameters:
   lit plane's stored depth differs from the receiver's: the nearest texel's centre is up to 0.71
   texels away, bilinear interpolation reproduces a plane (0.5 covers curvature), a k x k
   percentage-closer filter reaches 0.71 k; the dither adds 0.71. Without normals, slope and normal
-  offset fall back to the constant term ``0.5 T``.
+  offset fall back to the constant term ``0.5 T``. ``"plane"`` (default, above): a texel's triangle
+  shadows the receiver when the exact test hits it, or when its plane crosses the receiver's ray more
+  than ``T * bias_scale * (0.5 + PLANE_CURVATURE r)`` in front of it; normals give the facing test
+  and eps start, no lift.
 - ``filter``: ``"nearest"``; ``"bilinear"`` (Williams: interpolate the light's depths at the exact
   transformed X, Y, then compare); ``"pcf"`` (percentage-closer filtering of ``pcf_size`` squared texels:
   fractional visibility).
@@ -41,9 +70,27 @@ The paper's remedies, as parameters:
 :meth:`ShadowMapMethod.visibility` gives the fractional visibility in [0, 1]; ``classify`` thresholds it:
 in shadow below 0.5. A normal facing away from the light is in shadow (visibility 0).
 
-Defaults (bias "normal", filter "nearest", 2048 texels). Measured side by side in one run against the
-exact method, 1.2 M receivers per scene (bench/results/shadow-map-defaults.md): misclassified at 2048
-with nearest / bilinear, bunny 0.072 / 0.157 %, ogre 0.098 / 0.176 %, teapot 0.020 / 0.044 %,
+Default bias, "plane" (bench/shadow_map_bias.py, results in bench/results/shadow-map-bias*.md; 1.2 M
+receivers per scene and light, against the exact method with the same normals or none). On 16 scenes x
+lights built for it (torus knot, CSG bracket, icosphere, box stack on a 40 x 40 ground; low, close,
+high point lights, directional light), worst case misclassified at 512 / 2048 / 4096 with nearest:
+without normals plane 1.33 / 0.23 / 0.11 % against the normal offset's 26.6 / 21.2 / 16.8 % (slope
+the same, constant 11.4 / 9.2 / 7.5 %); with normals plane 0.55 / 0.067 / 0.055 %, normal offset
+1.31 / 0.25 / 0.12 %, slope 0.52 / 0.13 / 0.065 %. The error falls from 512 to 4096 in all 32 cases
+(scene x light x normals). Caveat: the rule for BEHIND with normals (any surface at or behind the
+receiver, not only its own) was chosen on a 100 k-receiver probe of these scenes at 2048 (mean 0.021
+against 0.026 %). On bench/run.py's scenes, which it was not tuned on (bunny, ogre, default,
+light_inside), the mean at 2048 / 4096 is 0.052 / 0.019 % with normals (normal offset 0.082 / 0.043 %)
+and 0.13 / 0.053 % without (normal offset 3.3 / 2.1 %); at 512 with normals it is worse (0.48 against
+0.28 %): at a texel wider than the models' triangles the exact tests miss triangles the map does not
+hold. It costs time: at 2048 the query is 2.3-3.5x the normal offset's and 2.3-3.2x the exact
+method's (torus knot, bunny; 1.2 M receivers, interleaved medians): up to 9 distinct triangles tested
+per receiver instead of one depth read. Pass bias="normal" with normals where speed matters more. PCF with "plane" is worse than
+nearest (2048: 0.082 against 0.021 % mean with normals), as with the other biases.
+
+Filters, measured with the former default bias "normal" (filter "nearest", 2048 texels) side by side in
+one run against the exact method, 1.2 M receivers per scene (bench/results/shadow-map-defaults.md):
+misclassified at 2048 with nearest / bilinear, bunny 0.072 / 0.157 %, ogre 0.098 / 0.176 %, teapot 0.020 / 0.044 %,
 grazing_plane 0.022 / 0.044 %, contact 0.0036 / 0.0165 %, thin_occluder 0.0056 / 0.0123 %; nearest is
 lower at 23 of the 24 scene x resolution pairs (256 to 4096; the exception, grazing_plane at 256, is
 0.142 against 0.141 %), at no clear difference in time. Why: bilinear interpolation across a depth
@@ -76,13 +123,14 @@ from .methods import Method
 from .points import BOUNDS_SLACK, check_points
 from .views import View
 
-BIASES = ("constant", "slope", "normal")
+BIASES = ("constant", "slope", "normal", "plane")
 FILTERS = ("nearest", "bilinear", "pcf")
 DEFAULT_RESOLUTION = 2048
 MAX_RESOLUTION = raster.MAX_SIDE
 VIEW_FLOATS = 20            # kernels/shadow_map.cl
 CONSTANT_TEXELS = 0.5       # the constant term of every bias, in texels: rounding and curvature
 CONSTANT_TAN = 2.0          # tan(theta) the "constant" bias covers (~63 degrees)
+PLANE_CURVATURE = 1.0       # "plane": texels the surface may curve away from a stored plane per texel of reach
 NEAREST_REACH = math.sqrt(0.5)   # farthest a nearest texel's centre lies from the projection, in texels
 BILINEAR_REACH = 0.5
 FACE_MARGIN = 1e-5          # widening of the cube-face test, relative to the coordinates' size (float32: 6e-8)
@@ -118,7 +166,8 @@ class ShadowMapMethod(Method):
     bounded = True
     parameters = {
         "resolution": (None, f"texels per side of each (square) depth map; None picks {DEFAULT_RESOLUTION}"),
-        "bias": ("normal", "depth bias: 'constant', 'slope' (slope-scaled) or 'normal' (normal offset)"),
+        "bias": ("plane", "depth bias: 'plane' (the stored triangles' planes and exact tests at the receiver; "
+                          "needs no normals), 'constant', 'slope' (slope-scaled) or 'normal' (normal offset)"),
         "bias_scale": (1.0, "multiplies the default bias, which is derived from the texel footprint"),
         "filter": ("nearest", "'nearest', 'bilinear' (Williams' interpolated depth) or 'pcf' (percentage closer)"),
         "pcf_size": (3, "texels per side of the percentage-closer filter (odd)"),
@@ -173,6 +222,7 @@ class ShadowMapMethod(Method):
         self.maps = LightMaps(fitted.kind, origin, to_light, records, tuple(view for view, _ in views),
                               [None] * fitted.nviews, resolution)
         self._mesh, self._views_dev = mesh, self.device.to_device(records)
+        self._extent = float(np.abs(mesh.vertices.astype(np.float64) - origin).max(initial=0.0))
         self._receiver_bounds = receiver_bounds
         self.eps = float(eps)
         self._draw(receiver_bounds - origin)
@@ -184,7 +234,8 @@ class ShadowMapMethod(Method):
         faces = reached_faces(bounds, maps.to_light) if maps.kind == "cube" else [True]
         for k in np.flatnonzero(faces):
             if maps.depth[k] is None:
-                maps.depth[k] = raster.depth_map(self.device, self._mesh, maps.raster_views[k])
+                maps.depth[k] = raster.depth_map(self.device, self._mesh, maps.raster_views[k],
+                                                 triangles=self.bias == "plane")
         self._count_maps()
 
     # Classify -----------------------------------------------------------------------------------
@@ -205,11 +256,13 @@ class ShadowMapMethod(Method):
         if maps.kind == "cube":   # faces these points reach that prepare's bounds did not
             self._draw(receivers.bounds - maps.origin)
         normals_np = np.zeros(1, np.float32) if normals is None else np.ascontiguousarray(normals, dtype=np.float32)
+        vertices_dev, faces_dev = raster.mesh_buffers(device, self._mesh, maps.origin)   # what the maps drew
         kernel = device.kernel("shadow_map.cl", "shadow_visibility", self._options(normals is not None))
         kernel(device.queue, (-(-n // _GROUP) * _GROUP,), (_GROUP,),
                device.to_device(relative), device.to_device(normals_np),
                np.array([*maps.to_light, 0.0], dtype=np.float32), self._views_dev,
-               *self._map_buffers(), self.bias_texels(), np.float32(self.eps), np.uint32(self.seed), np.int32(n),
+               *self._map_buffers(), *self._map_buffers("triangle"), vertices_dev, faces_dev,
+               np.float32(self._extent), self.bias_texels(), np.float32(self.eps), np.uint32(self.seed), np.int32(n),
                visibility_dev)
         return device.from_device(visibility_dev, n, np.float32)
 
@@ -223,11 +276,13 @@ class ShadowMapMethod(Method):
             raise ValueError("points: outside the receiver_bounds this shadow map was prepared for; "
                              "prepare again with bounds that cover them")
 
-    def _map_buffers(self) -> list:
-        """The kernel's six map arguments: face k's map, a single view's map repeated; a face not drawn
-        (no point of the call uses it) passes another face's buffer."""
+    def _map_buffers(self, kind: str = "buffer") -> list:
+        """The kernel's six map arguments: face k's depth map (``kind="buffer"``) or triangle ids
+        (``"triangle"``; the depths stand in when the bias reads no ids), a single view's repeated; a face
+        not drawn (no point of the call uses it) passes another face's buffer."""
         drawn = [depth for depth in self.maps.depth if depth is not None]
-        return [(self.maps.depth[k % len(self.maps.depth)] or drawn[0]).buffer for k in range(6)]
+        maps = [self.maps.depth[k % len(self.maps.depth)] or drawn[0] for k in range(6)]
+        return [getattr(m, kind) if getattr(m, kind) is not None else m.buffer for m in maps]
 
     def classify(self, points, normals=None) -> np.ndarray:
         """bool (N,): True = in shadow, where the visibility is below 0.5."""
@@ -235,8 +290,10 @@ class ShadowMapMethod(Method):
 
     def bias_texels(self) -> np.ndarray:
         """(constant, slope or lift) coefficients of the bias in texel footprints (see the module docstring)."""
-        constant = CONSTANT_TEXELS + (CONSTANT_TAN * self.reach() if self.bias == "constant" else 0.0)
-        return np.array([constant, self.reach()], dtype=np.float32) * np.float32(self.bias_scale)
+        extra = {"constant": CONSTANT_TAN * self.reach(), "plane": PLANE_CURVATURE * self.reach()}
+        constant = CONSTANT_TEXELS + extra.get(self.bias, 0.0)
+        slope = 0.0 if self.bias == "plane" else self.reach()   # "plane" lifts nothing: it shifted shadow edges
+        return np.array([constant, slope], dtype=np.float32) * np.float32(self.bias_scale)
 
     def reach(self) -> float:
         """How far, in texels, the filter's samples lie from a receiver's exact projection (sets the bias)."""
@@ -247,8 +304,9 @@ class ShadowMapMethod(Method):
     def _count_maps(self) -> None:
         maps = self.maps
         drawn = sum(depth is not None for depth in maps.depth)
+        layers = 2 if self.bias == "plane" else 1   # depths, and triangle ids for "plane"
         self.stats.update(kind=maps.kind, views=len(maps.depth), drawn=drawn, resolution=maps.resolution,
-                          device_bytes=4 * drawn * maps.resolution**2)
+                          device_bytes=4 * layers * drawn * maps.resolution**2)
 
     def _options(self, has_normals: bool) -> tuple[str, ...]:
         maps = self.maps
@@ -325,14 +383,25 @@ def _view(fitted: lightspace.LightViews, k: int, origin: np.ndarray, corners: np
     matrix = np.zeros((4, 4))
     if fitted.perspective:
         eye = fitted.eye
-        if near is None:   # the box is in front of a single view: its nearest corner bounds every occluder
-            near = max(0.99 * float(((corners - eye) @ forward).min()), 1e-6 * scale)
-        far = math.inf
         matrix[0, :3] = (2 * right - (u0 + u1) * forward) / size
         matrix[1, :3] = (2 * up - (v0 + v1) * forward) / size
         matrix[3, :3] = forward
         matrix[:, 3] = -matrix[:, :3] @ eye
-        matrix[2, 3] = near                              # depth = near / distance
+        if near is None:   # the box is in front of a single view: its corners bound every occluder
+            # depth = near (far - w) / (w (far - near)), w the distance along the axis: 1 at near, 0 at
+            # far, with far - w = (far + forward.eye) - forward.p a difference of scene-sized numbers, so
+            # a light 1e6 scene sizes away still ranks the scene's surfaces (near / w alone would put
+            # them all within 1e-6 of 1, a few float32 steps).
+            t = corners @ forward
+            margin = 1e-3 * max(float(t.max() - t.min()), 1e-6 * scale)
+            near = max(0.99 * float((t - forward @ eye).min()), 1e-6 * scale)
+            far_ahead = float(t.max()) + margin                # far + forward.eye: scene-sized
+            far = far_ahead - float(forward @ eye)
+            k = near / (far - near)
+            matrix[2, :3], matrix[2, 3] = -k * forward, k * far_ahead
+        else:
+            far = math.inf
+            matrix[2, 3] = near                          # depth = near / distance
     else:
         t = corners @ forward
         margin = 1e-3 * max(float(t.max() - t.min()), 1e-6 * scale)
@@ -343,5 +412,5 @@ def _view(fitted: lightspace.LightViews, k: int, origin: np.ndarray, corners: np
         matrix[3, 3] = 1.0
     record = np.zeros(VIEW_FLOATS, dtype=np.float32)
     record[:16] = matrix.ravel()
-    record[16:19] = size / resolution, near, min(far, np.finfo(np.float32).max)
+    record[16:20] = size / resolution, near, min(far, np.finfo(np.float32).max), near / far if fitted.perspective else 0
     return View(origin.copy(), matrix, resolution, resolution), record

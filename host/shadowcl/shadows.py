@@ -8,6 +8,7 @@
 
 from __future__ import annotations
 
+import copy
 import time
 
 import numpy as np
@@ -41,8 +42,8 @@ class Shadows:
         self.bounds = mesh.bounds.astype(np.float64) if bounds is None else check_bounds("bounds", bounds)
         self._device = get_device(device)
         self._occluders = occluders(cls, scene_or_mesh)
-        self._params = params
-        self._instance = cls(self._device, **params)
+        self._params = copy.deepcopy(params)   # kept for _fitted_to: never the caller's arrays
+        self._instance = cls(self._device, **self._params)
         self._prepare_s = self._classify_s = self._check_s = 0.0
         self._outside = 0
         self._receivers = 0

@@ -62,7 +62,7 @@ import pyopencl as cl
 
 from . import lightspace
 from . import voxelize as vz
-from .checks import check_bounds, choice, optional_int
+from .checks import check_bounds, choice, flag, optional_int
 from .lights import PointLight, check_light
 from .methods import Method
 from .points import check_points
@@ -91,6 +91,15 @@ def scene_patches(device, scene_or_surface):
             raise ValueError("scene: no subdivision surfaces to voxelize")
         return vz.merge_tables([surface.patch_table(device) for _, surface in surfaces])
     return vz.patch_table_of(device, scene_or_surface)
+
+
+def control_points(scene_or_surface) -> "np.ndarray | None":
+    """The control-mesh vertices of what :func:`scene_patches` voxelizes (None for a bare patch table)."""
+    surfaces = getattr(scene_or_surface, "surfaces", None)
+    if surfaces and hasattr(scene_or_surface, "objects"):
+        return np.vstack([surface.vertices for _, surface in surfaces])
+    vertices = getattr(scene_or_surface, "vertices", None)
+    return vertices if isinstance(vertices, np.ndarray) else None
 
 
 class VoxelMethod(Method):
@@ -125,9 +134,7 @@ class VoxelMethod(Method):
         self.resolution = optional_int("resolution", p["resolution"], 1, vz.MAX_RESOLUTION)
         self.determination = choice("determination", p["determination"], DETERMINATIONS)
         self.connectivity = choice("connectivity", p["connectivity"], vz.CONNECTIVITIES)
-        if p["frame_buffer"] not in (None, True, False):
-            raise TypeError(f"frame_buffer: expected None, True or False, got {p['frame_buffer']!r}")
-        self.frame_buffer = p["frame_buffer"]
+        self.frame_buffer = None if p["frame_buffer"] is None else flag("frame_buffer", p["frame_buffer"])
         self.grid_bounds = None if p["grid_bounds"] is None else check_bounds("grid_bounds", p["grid_bounds"])
         self.unplaced = choice("unplaced", p["unplaced"], UNPLACED)
         self._builder = lightspace.ListBuilder(device, corners=4)
@@ -158,6 +165,7 @@ class VoxelMethod(Method):
         frame_bytes = 4 * vz.frame_word_count(resolution)
         frame_buffer = self.frame_buffer if self.frame_buffer is not None else frame_bytes <= self.device.max_alloc_bytes
         self.table, self.light, self.eps = table, light, float(eps)
+        self._control_points = control_points(scene_or_surface)
         self.light_vec = (np.asarray(light.position if isinstance(light, PointLight) else light.direction,
                                      dtype=np.float32))
         self.resolution_used, self.frame_buffer_used = resolution, bool(frame_buffer)
@@ -181,7 +189,7 @@ class VoxelMethod(Method):
         dev, queue = self.device, self.device.queue
         t0 = time.perf_counter()
         vox = vz.voxelize(dev, self.table, self.resolution_used, self.connectivity, frame_buffer=self.frame_buffer_used,
-                          grid_bounds=self.grid_bounds)
+                          grid_bounds=self.grid_bounds, control_points=self._control_points)
         t1 = time.perf_counter()
         n = vox.nleaves
         nsamples = 4 * n

@@ -54,7 +54,7 @@ import numpy as np
 import pyopencl as cl
 from scipy.spatial import cKDTree
 
-from .checks import check_bounds, positive_int
+from .checks import check_bounds, choice, positive_int
 from .geometry import Mesh
 from .topology import components
 
@@ -175,14 +175,17 @@ def unpack_states(words: np.ndarray, count: int) -> np.ndarray:
     return ((words[:, None] >> shifts) & 3).astype(np.uint8).ravel()[:count]
 
 
-def grid_frame(points: np.ndarray, resolution: int, bounds=None) -> tuple[np.ndarray, float]:
+def grid_frame(points: np.ndarray, resolution: int, bounds=None, control_points=None) -> tuple[np.ndarray, float]:
     """(origin, voxel_size) of a cube of ``resolution`` voxels centred on ``bounds`` ((2, 3) box; None: the
-    box of ``points``), a hair larger than the box's longest side."""
+    box of ``points``), a hair larger than the box's longest side. ``bounds`` must hold ``control_points``
+    (the control mesh's vertices, whose hull holds the limit surface; None: ``points``): the patch
+    table's extrapolated boundary points may lie outside it, and the kernel only maps limit points."""
     if bounds is None:
         lo, hi = points.min(axis=0).astype(np.float64), points.max(axis=0).astype(np.float64)
     else:
         lo, hi = check_bounds("grid_bounds", bounds)
-        if np.any(points.min(axis=0) < lo) or np.any(points.max(axis=0) > hi):
+        held = points if control_points is None else control_points
+        if np.any(held.min(axis=0) < lo) or np.any(held.max(axis=0) > hi):
             raise ValueError("grid_bounds: the box must contain every control point of the surfaces")
     extent = float(np.max(hi - lo))
     if not np.isfinite(extent):
@@ -220,7 +223,8 @@ def check_table(table) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def voxelize(device, surface_or_table, resolution: int, connectivity: int = 26,
-             frame_buffer: bool | None = None, initial_capacity: int | None = None, grid_bounds=None) -> Voxelization:
+             frame_buffer: bool | None = None, initial_capacity: int | None = None, grid_bounds=None,
+             control_points=None) -> Voxelization:
     """Voxelize a subdivision surface (or its patch table) into a ``resolution``^3 cubic frame buffer.
 
     ``connectivity`` (6, 18, 26) is the N of N-adjacency a leaf's corner voxels must satisfy.
@@ -228,14 +232,16 @@ def voxelize(device, surface_or_table, resolution: int, connectivity: int = 26,
     keeps only the leaves (section 5.1), None keeps it when it fits in one device buffer.
     ``initial_capacity`` sizes the first queue and leaf buffers (tests use a tiny one to force regrowth).
     ``grid_bounds`` ((2, 3) world box holding every control point) fixes the cube the grid spans, so
-    different surfaces can share one voxel grid; None: the control points' box.
+    different surfaces can share one voxel grid; None: the control points' box. ``control_points``
+    (default: the surface's vertices, else the table's points) are what ``grid_bounds`` must hold.
     """
     resolution = positive_int("resolution", resolution, 1, MAX_RESOLUTION)
-    if connectivity not in CONNECTIVITIES:
-        raise ValueError(f"connectivity: expected one of {CONNECTIVITIES}, got {connectivity!r}")
+    connectivity = choice("connectivity", connectivity, CONNECTIVITIES)
     table = patch_table_of(device, surface_or_table)
     points, first, levels = check_table(table)
-    origin, size = grid_frame(points, resolution, grid_bounds)
+    if control_points is None and isinstance(getattr(surface_or_table, "vertices", None), np.ndarray):
+        control_points = surface_or_table.vertices    # a SubdivisionSurface's control mesh
+    origin, size = grid_frame(points, resolution, grid_bounds, control_points)
     frame_bytes = 4 * frame_word_count(resolution)
     if frame_buffer is None:
         frame_buffer = frame_bytes <= device.max_alloc_bytes

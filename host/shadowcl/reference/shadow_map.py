@@ -20,6 +20,19 @@ method's host code: it takes the light's depth maps and view records as plain ar
    lit where the stored surface is not nearer than the receiver's distance minus the bias. Nearest:
    the texel containing the point; bilinear: the depths interpolated first; pcf: the fraction of
    the ``k x k`` texels around the nearest that are lit. Texel indices are clamped to the map.
+5. Bias "plane" reads the maps' triangle ids instead of their depths and lifts nothing. For the ray
+   ``s + lambda l`` from the start (``l`` unit, towards the light), a texel's triangle is HIT when the
+   ray meets it for ``tmin < lambda < tmax`` (``tmin`` = eps + rounding, ``tmax`` the light's distance
+   or infinite), BEHIND when it meets it at ``-behind < lambda < tmin``
+   (``behind`` = ``ahead`` without normals, infinite with them: a receiver facing the light), AHEAD
+   when not and its plane crosses the
+   ray more than ``ahead`` = ``constant T + tmin`` in front of ``s`` and before the light. A texel
+   shadows when HIT, or AHEAD unless some texel the filter reads is BEHIND. Nearest (reading the 3 x 3
+   around): in shadow when any is HIT or the own texel shadows; bilinear: lit when the texels not
+   shadowing carry at least half the bilinear weight of the four around; pcf: the fraction of the
+   ``k x k`` texels not shadowing. Rounding is
+   ``PRECISION_ULPS`` float32 epsilons of ``extent`` (the largest vertex coordinate) plus the start's
+   largest coordinate.
 """
 
 from __future__ import annotations
@@ -28,7 +41,9 @@ import numpy as np
 
 TAN_MAX = 16.0
 FILTERS = ("nearest", "bilinear", "pcf")
-BIASES = ("constant", "slope", "normal")
+BIASES = ("constant", "slope", "normal", "plane")
+PRECISION_ULPS = 16.0
+FLT_EPSILON = float(np.finfo(np.float32).eps)
 
 
 def hash32(x: np.ndarray) -> np.ndarray:
@@ -54,10 +69,10 @@ def dither_offsets(n: int, seed: int) -> np.ndarray:
 
 
 def distance_of(depth: np.ndarray, record: np.ndarray, perspective: bool) -> np.ndarray:
-    near, far = float(record[17]), float(record[18])
-    if perspective:
+    near, far, ratio = float(record[17]), float(record[18]), float(record[19])
+    if perspective:   # depth = near (far - w) / (w (far - near)), ratio = near / far (0: far infinite)
         with np.errstate(divide="ignore"):
-            return np.where(depth > 0, near / np.where(depth > 0, depth, 1.0), np.inf)
+            return np.where(depth > 0, near / np.where(depth > 0, depth * (1 - ratio) + ratio, 1.0), np.inf)
     return far - depth * (far - near)
 
 
@@ -106,12 +121,83 @@ def lit_fraction(depth_map, record, perspective, s, t, reach, filter, pcf_size=3
     return lit / (2 * half + 1) ** 2
 
 
+HIT, BEHIND, AHEAD = 1, 2, 3
+
+
+def triangle_verdict(triangles, start, direction, tmin, tmax, ahead, behind, slack=0.0):
+    """(N,) what triangle ``triangles[i]`` ((N, 3, 3); NaN rows for an empty texel) says about ray i: HIT,
+    BEHIND, AHEAD or 0 (module docstring, item 5). ``slack`` widens (> 0) or narrows (< 0) the triangles
+    by that much in barycentric coordinates and moves the thresholds by that relative amount: a
+    rounding-sized change."""
+    a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]
+    u, v = b - a, c - a
+    normal = np.cross(u, v)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # Moller-Trumbore in float64: lambda along the ray and the barycentrics of its plane point
+        pvec = np.cross(direction, v)
+        det = np.einsum("ij,ij->i", u, pvec)
+        w = start - a
+        beta = np.einsum("ij,ij->i", w, pvec) / det
+        qvec = np.cross(w, u)
+        gamma = np.einsum("ij,ij->i", direction, qvec) / det
+        lam = np.einsum("ij,ij->i", v, qvec) / det
+        inside = (beta >= -slack) & (gamma >= -slack) & (beta + gamma <= 1 + slack) & (det != 0)
+        threshold = tmin * (1 + slack)
+        hit = inside & (lam > threshold) & (lam < tmax)
+        at_or_behind = inside & (lam < threshold) & (lam > -behind)
+        facing = np.einsum("ij,ij->i", normal, direction)
+        plane = np.einsum("ij,ij->i", normal, a - start) / facing
+        in_front = (facing != 0) & (plane > ahead * (1 + slack)) & (plane < tmax)
+    verdict = np.where(hit, HIT, np.where(at_or_behind, BEHIND, np.where(in_front, AHEAD, 0)))
+    return np.where(np.isfinite(a[:, 0]), verdict, 0)
+
+
+def plane_lit_fraction(ids, vertices, faces, start, direction, s, t, tmin, tmax, ahead, behind, filter, pcf_size,
+                       slack):
+    """(N,) the "plane" bias's visibility from the triangle-id map ``ids`` (R, R) (module docstring, item 5)."""
+    res = ids.shape[0]
+    padded = np.concatenate([vertices[faces], np.full((1, 3, 3), np.nan)])   # index -1: an empty texel
+
+    def verdict(r, c):
+        f = ids[np.clip(r, 0, res - 1), np.clip(c, 0, res - 1)]
+        return triangle_verdict(padded[f], start, direction, tmin, tmax, ahead, behind, slack)
+
+    hit, in_front, seen = np.zeros(len(s)), np.zeros(len(s)), np.zeros(len(s), bool)
+    if filter == "bilinear":
+        s0, t0 = np.floor(s), np.floor(t)
+        fs, ft = s - s0, t - t0
+        c, r = s0.astype(np.int64), t0.astype(np.int64)
+        for dr in (0, 1):
+            for dc in (0, 1):
+                weight = (fs if dc else 1 - fs) * (ft if dr else 1 - ft)
+                v = verdict(r + dr, c + dc)
+                hit += np.where(v == HIT, weight, 0.0)
+                in_front += np.where(v == AHEAD, weight, 0.0)
+                seen |= v == BEHIND
+        return (1 - hit - np.where(seen, 0.0, in_front) >= 0.5).astype(np.float64)
+    c, r = np.floor(s + 0.5).astype(np.int64), np.floor(t + 0.5).astype(np.int64)
+    half = 1 if filter == "nearest" else pcf_size // 2
+    for dr in range(-half, half + 1):
+        for dc in range(-half, half + 1):
+            v = verdict(r + dr, c + dc)
+            hit += v == HIT
+            in_front += (v == AHEAD) & (filter != "nearest" or (dr == 0 and dc == 0))   # nearest: its own texel's plane
+            seen |= v == BEHIND
+    shadowing = hit + np.where(seen, 0.0, in_front)
+    if filter == "nearest":
+        return (shadowing == 0).astype(np.float64)
+    return 1 - shadowing / (2 * half + 1) ** 2
+
+
 def visibility(points_rel, normals, kind, to_light, views, depth, bias, bias_mode="slope", filter="bilinear",
-               pcf_size=3, dither=0, seed=0, perturb=(0.0, 0.0, 0.0), eps=0.0):
+               pcf_size=3, dither=0, seed=0, perturb=(0.0, 0.0, 0.0), eps=0.0, triangles=None):
     """(N,) visibility in [0, 1] of points relative to the maps' origin (see the module docstring).
 
     ``perturb`` = (ds, dt, relative reach change) moves every decision slightly: the tests call it
     with small perturbations to find the receivers that float32 rounding may decide either way.
+    ``triangles`` = (ids, vertices, faces, extent) for bias "plane": (V, R, R) triangle-id maps, the
+    mesh's vertices relative to the maps' origin (as the device holds them), its faces, the largest
+    vertex coordinate.
     """
     p = np.asarray(points_rel, dtype=np.float64).copy()
     n = len(p)
@@ -128,6 +214,7 @@ def visibility(points_rel, normals, kind, to_light, views, depth, bias, bias_mod
     records = np.asarray(views, dtype=np.float64)[face]
     texel = texel_footprint(p, to_light, records, perspective)
     offset = bias[0] * texel
+    plane = bias_mode == "plane"
     # eps along the ray, as a distance along the view axis (cos alpha = axial distance / ray distance)
     offset = offset + (eps * texel / records[:, 16] / dist if perspective else eps)
     facing = np.ones(n, dtype=bool)
@@ -149,6 +236,16 @@ def visibility(points_rel, normals, kind, to_light, views, depth, bias, bias_mod
         sel = np.flatnonzero((face == f) & facing)
         s, t, z = texel_coordinates(p[sel], views[f], res)
         s, t = s + jitter[sel, 0] + perturb[0], t + jitter[sel, 1] + perturb[1]
+        if plane:
+            ids, vertices, faces, extent = triangles
+            start = p[sel]
+            tmin = eps + PRECISION_ULPS * FLT_EPSILON * (extent + np.abs(start).max(axis=1))
+            tmax = dist[sel] if perspective else np.inf
+            ahead = bias[0] * texel[sel] + tmin
+            behind = np.inf if normals is not None else ahead
+            out[sel] = plane_lit_fraction(ids[f], np.asarray(vertices, np.float64), faces, start, light_dir[sel], s, t,
+                                          tmin, tmax, ahead, behind, filter, pcf_size, perturb[2])
+            continue
         reach = distance_of(z, views[f], perspective) * (1 + perturb[2]) - offset[sel]
         out[sel] = lit_fraction(depth[f], views[f], perspective, s, t, reach, filter, pcf_size)
     return out

@@ -33,6 +33,6 @@ Modules, one job each: :mod:`.refinement` (polygon topology, one Catmull-Clark s
 
 from .patches import PatchTable
 from .stam import MAX_STAM_LEVELS, STAM_TOLERANCE
-from .surface import NEAR_EV, TESSELLATION_TOLERANCE, SubdivisionSurface
+from .surface import MAX_TESSELLATION_CELLS, NEAR_EV, TESSELLATION_TOLERANCE, SubdivisionSurface
 
-__all__ = ["MAX_STAM_LEVELS", "NEAR_EV", "PatchTable", "STAM_TOLERANCE", "SubdivisionSurface", "TESSELLATION_TOLERANCE"]
+__all__ = ["MAX_STAM_LEVELS", "MAX_TESSELLATION_CELLS", "NEAR_EV", "PatchTable", "STAM_TOLERANCE", "SubdivisionSurface", "TESSELLATION_TOLERANCE"]
