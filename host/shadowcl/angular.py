@@ -66,7 +66,14 @@ Pipeline (kernels/angular.cl):
    slower to build (1.33 s against 0.44 s at 100 000 cubes: the loops are chained on the host), though
    faster to look up (0.060 s against 0.095 s for 500 000 receivers; a table 3.8 x smaller). Exact depth
    from face planes also holds on every mesh without the chord's assumptions (no layered folds of one
-   lit region, a cap convex between creases).
+   lit region, a cap convex between creases). But a face record is the face's cut by the row's *centre*:
+   a receiver lying on a closed occluder's lit cap, up to half a row off it, meets the plane of a
+   neighbouring face extended past its edge, above a convex cap, and is falsely shadowed
+   (bench/results/angular_caps.md: 12-21 % of such receivers on a sphere, torus or cylinder under a
+   directional light, 0.25-7 % with the loop table, whose chord lies below the cap). Requiring the ray to
+   cross the listed face removes those (0 on the sphere) but turns the listings a row's centre misses
+   into false lights in the shadow (ground receivers: 9 -> 55-110 of 1,500): that needs spans over the
+   whole row, not done.
 4. **Lookups**: per receiver, its row and ``s``; a binary search finds the records starting at or
    before ``s``, a backward scan tests them (first hit wins) and stops where the row's running maximum
    of ``s_hi`` falls below ``s`` (section 7 step 2, without walking the whole entry). ``classify_view``
@@ -167,7 +174,9 @@ def check_even_count(sil) -> None:
 @dataclass(frozen=True)
 class Frame:
     """World -> angular frame: ``local = rotation @ (world - origin)``; the light at the origin for a
-    point light; rows over ``[t0, t0 + rows * dt)``; ``full_circle`` rows wrap round."""
+    point light; rows over ``[t0, t0 + rows * dt)``; ``full_circle`` rows wrap round. ``centre`` (world)
+    is the occluders' box centre: the kernels hold receivers and face planes relative to it
+    (:attr:`anchor`), so that a distant point light costs the depth test no precision."""
 
     origin: np.ndarray
     rotation: np.ndarray
@@ -176,6 +185,13 @@ class Frame:
     dt: float
     rows: int
     full_circle: bool
+    centre: np.ndarray
+
+    @property
+    def anchor(self) -> np.ndarray:
+        """(3,) frame coordinates of :attr:`centre`, rounded to float32: the kernels get it as floats, and
+        host and kernels must subtract the very same point."""
+        return self.to_local(self.centre[None])[0].astype(np.float32).astype(np.float64)
 
     def to_local(self, world: np.ndarray) -> np.ndarray:
         """(N, 3) float64 frame coordinates of world positions."""
@@ -299,6 +315,8 @@ def build_table(device, local_vertices: np.ndarray, faces: np.ndarray, table_fac
     rows = frame.rows
     options = frame_options(frame)
     vertices_g = dev.to_device(np.ascontiguousarray(local_vertices, dtype=np.float32))
+    relative_g = dev.to_device(np.ascontiguousarray(local_vertices - frame.anchor, dtype=np.float32))
+    anchor = tuple(np.float32(c) for c in frame.anchor)
     faces_g = dev.to_device(np.ascontiguousarray(faces, dtype=np.int32))
     ids_g = dev.to_device(np.ascontiguousarray(table_faces, dtype=np.int32))
     planes_g = dev.empty(16 * max(n, 1), "face planes")
@@ -306,8 +324,8 @@ def build_table(device, local_vertices: np.ndarray, faces: np.ndarray, table_fac
     nrows_g = dev.empty(4 * max(n, 1), "face row counts")
     scalars = (np.int32(n), np.float32(frame.t0), np.float32(frame.dt), np.int32(rows))
     if n:
-        dev.kernel("angular.cl", "face_rows", options)(queue, (n,), None, vertices_g, faces_g, ids_g, *scalars,
-                                                       planes_g, first_g, nrows_g)
+        dev.kernel("angular.cl", "face_rows", options)(queue, (n,), None, vertices_g, relative_g, faces_g, ids_g,
+                                                       *scalars, *anchor, planes_g, first_g, nrows_g)
     counts = row_counts(dev.from_device(first_g, n, np.int32), dev.from_device(nrows_g, n, np.int32), rows)
     pairs = None if loops is None else loop_pairs(dev, vertices_g, loops, frame, stats)
     npairs = np.zeros(rows, dtype=np.int64) if pairs is None else pairs[2]
@@ -395,7 +413,8 @@ def loop_pairs(device, vertices_g, loops, frame: Frame, stats: dict):
         if crossings:
             dev.kernel("angular.cl", "pair_rows", options)(
                 queue, (rows,), None, offsets_g, np.int32(rows), np.float32(frame.t0), np.float32(frame.dt),
-                vertices_g, tails_g, heads_g, np.int32(cap), cross_g, queue_g, pairs_g, npairs_g, overflow_g)
+                vertices_g, tails_g, heads_g, np.int32(cap), *(np.float32(c) for c in frame.anchor), cross_g, queue_g,
+                pairs_g, npairs_g, overflow_g)
         if dev.from_device(overflow_g, 1, np.int32)[0] == 0:
             break
         cap *= 2
@@ -496,8 +515,10 @@ def table_entries(device, table: Table) -> dict:
     offsets = device.from_device(table.offsets, rows + 1, np.int32)
     rec = device.from_device(table.records, (max(table.entries, 1), REC_FLOATS), np.float32)[:table.entries]
     ident = rec[:, 6].view(np.int32)
+    plane = rec[:, 2:6].astype(np.float64)
+    plane[:, 3] += plane[:, :3] @ table.frame.anchor          # the kernels' offsets are relative to the anchor
     return dict(offsets=offsets, row=np.repeat(np.arange(rows), np.diff(offsets)), face=ident,
-                region=np.where(ident < 0, -ident - 1, -1), s_lo=rec[:, 0], s_hi=rec[:, 1], plane=rec[:, 2:6])
+                region=np.where(ident < 0, -ident - 1, -1), s_lo=rec[:, 0], s_hi=rec[:, 1], plane=plane)
 
 
 # Method ----------------------------------------------------------------------------------------------------
@@ -511,6 +532,7 @@ class AngularMethod(Method):
     """
 
     name = "angular"
+    min_light_clearance = 1e-5      # measured (bench/range.py): right from 1e-7 off a surface, not on it
     image_space = True
     parameters = {
         "theta_resolution": (None, "rows of the table (theta steps; Y steps for a directional light); None picks "
@@ -599,7 +621,8 @@ class AngularMethod(Method):
         if not full:                                   # pad half a row each side: extreme corners get a centre
             pad = 0.5 * span / rows
             lo, hi = lo - pad, hi + pad
-        frame = Frame(origin, rotation, point, lo, (hi - lo) / rows, rows, full)
+        centre = 0.5 * (mesh.vertices[used].min(axis=0) + mesh.vertices[used].max(axis=0)) if len(used) else origin
+        frame = Frame(origin, rotation, point, lo, (hi - lo) / rows, rows, full, np.asarray(centre, dtype=np.float64))
         loops = None
         if self.table_kind == "loops":
             # closed components by their loops (the row range above already covers them); open or
@@ -654,11 +677,12 @@ class AngularMethod(Method):
             pts, nrm = points, normals
         else:
             rot, origin, dtype = frame.rotation, np.zeros(3), np.float32
-            pts = frame.to_local(points)
+            pts = frame.to_local(points) - frame.anchor
             nrm = None if normals is None else receivers.unit_normals() @ rot.T
         pts_g = dev.to_device(np.ascontiguousarray(pts, dtype=dtype))
         nrm_g = pts_g if nrm is None else dev.to_device(np.ascontiguousarray(nrm, dtype=dtype))
-        args = (pts_g, nrm_g, dev.to_device(np.ascontiguousarray(rot, dtype=dtype)), *(dtype(c) for c in origin))
+        args = (pts_g, nrm_g, dev.to_device(np.ascontiguousarray(rot, dtype=dtype)), *(dtype(c) for c in origin),
+                *(np.float32(c) for c in frame.anchor))
         return len(points), args, frame_options(frame, normals is not None) + (f"-DINPUT_F64={int(self._fp64)}",)
 
     def _common_args(self):
@@ -713,7 +737,8 @@ class AngularMethod(Method):
             return frame.rows
         if not _same_axis(prefer_x, self.prefer_x):
             _, rotation = angular_frame(self.light, self.mesh.vertices[self._sample], prefer_x)
-            frame = Frame(frame.origin, rotation, frame.point, frame.t0, frame.dt, frame.rows, frame.full_circle)
+            frame = Frame(frame.origin, rotation, frame.point, frame.t0, frame.dt, frame.rows, frame.full_circle,
+                          frame.centre)
         t = np.full(view.height * view.width, np.nan)
         t[seen.pixel_index] = row_coordinate(frame.to_local(seen.points), frame.point)
         step = np.abs(np.diff(t.reshape(view.height, view.width), axis=0))
@@ -763,7 +788,7 @@ def light_inside(adjacency, light) -> None:
         return
     enclosing = adjacency.enclosing_faces(light.position)
     if len(enclosing):
-        raise ValueError(f"light: the point light at {light.position.tolist()} is inside a closed solid "
+        raise ValueError(f"light: the point light is inside a closed solid "   # (its position here is the frame's)
                          f"({len(enclosing)} faces); everything outside that solid is in its shadow, which "
                          "the angular table cannot represent (no face of it turns to the light): move the "
                          "light out or open the mesh")

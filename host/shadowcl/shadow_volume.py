@@ -225,8 +225,15 @@ def build_volume(occluders: Mesh, silhouette: Silhouette, light, receiver_bounds
         far = vertices + extrusion * direction
         reach = nearest + extrusion
     if not (np.isfinite(extrusion) and np.all(np.abs(far) < FLOAT32_SAFE)):
-        raise ValueError("light: lies (almost) in the plane of a light-facing face; the shadow volume's far cap "
-                         f"cannot be placed past the receivers in float32 (extrusion {extrusion:.3g})")
+        size = bounds_diagonal(occluders.bounds)
+        if isinstance(light, PointLight) and nearest < 1e-6 * size:
+            cause = (f"light: lies (almost) in the plane of a light-facing face ({nearest:.3g} from it, the "
+                     f"occluders are {size:.3g} across)")
+        else:
+            cause = (f"receiver_bounds: the receivers reach {max(depth if not isinstance(light, PointLight) else farthest, 0):.3g} "
+                     f"from the light, too far beyond occluders {size:.3g} across")
+        raise ValueError(f"{cause}; the shadow volume's far cap cannot be placed past the receivers in float32 "
+                         f"(extrusion {extrusion:.3g})")
     nv = len(vertices)
     a, b = edges[:, 0], edges[:, 1]
     volume_faces = np.concatenate([
@@ -261,6 +268,8 @@ class ShadowVolumeMethod(Method):
     ``silhouettes_missed``, stage times)."""
 
     name = "shadow_volume"
+    point_light_reach = 2.0 ** 12   # measured (bench/range.py): wrong from ~3e4 sizes
+    min_light_clearance = 1e-4      # measured (bench/range.py): right from 1e-5 off a surface, not at 1e-6
     image_space = True
     parameters = {
         "lod": (None, "occluder level of detail: None (full mesh), a level index of shadowcl.lod.levels, or 'auto' "
