@@ -1,5 +1,7 @@
 """render: every shipped scene renders, and the default scene's shadows are the exact answer."""
 
+import importlib
+
 import numpy as np
 import pytest
 
@@ -73,6 +75,32 @@ def test_render_rejects_bad_sizes(device):
         sc.render(scene, width=0, height=10, device=device)
     with pytest.raises(TypeError, match="height: expected an integer"):
         sc.render(scene, width=10, height=2.5, device=device)
+
+
+def test_render_sizes_are_checked_against_memory_before_allocating(device, monkeypatch):
+    """A frame that does not fit the host's (or the device's) free memory is refused with the amount
+    needed; the memory figures are set here so the test does not depend on the machine."""
+    render_module = importlib.import_module("shadowcl.render")   # sc.render is the function
+    scene = sc.Scene.load(SCENES / "default.toml")
+    monkeypatch.setattr(render_module, "available_host_bytes", lambda: 1 << 30)
+    with pytest.raises(ValueError, match=r"width, height: a 4096 x 4096 frame with 1 light\(s\) needs about 4\.81 GiB "
+                                         r"but the host has 1\.00 GiB available"):
+        sc.render(scene, width=4096, height=4096, device=device)
+    assert sc.render(scene, width=64, height=32, device=device).shape == (32, 64, 3)   # a size that fits works
+    monkeypatch.setattr(render_module, "DEVICE_BYTES_PER_PIXEL", 1 << 40)
+    with pytest.raises(ValueError, match=r"width, height: .* but device .* has"):
+        sc.render(scene, width=64, height=32, device=device)
+
+
+def test_method_resolutions_are_checked_against_host_memory(device, monkeypatch):
+    """On a CPU device, a buffer the host cannot give is refused with what it was for (PoCL would crash)."""
+    device_module = importlib.import_module("shadowcl.device")
+    monkeypatch.setattr(device_module, "available_host_bytes", lambda: 100 << 20)
+    scene = sc.Scene.load(SCENES / "default.toml")
+    points = np.array([[0.0, 0.0, 0.0]])
+    with pytest.raises(ValueError, match=r"depth buffer \(8192 x 8192\): a 256 MiB buffer needs about 0\.25 GiB but the host has 0\.10 GiB"):
+        sc.shadow_mask(scene, scene.light, points, method="shadow_map", resolution=8192, device=device)
+    assert sc.shadow_mask(scene, scene.light, points, method="shadow_map", resolution=1024, device=device).shape == (1,)
 
 
 def test_far_offset_scene_renders_like_the_default(device):

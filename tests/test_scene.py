@@ -300,7 +300,7 @@ BAD_CONSTRUCTIONS = [
     (lambda: Scene([("t", TRIANGLE)], [POINT], camera="top"), TypeError, r"camera: expected a Camera or None"),
     (lambda: Scene([("t", TRIANGLE)], [POINT], colors=[None, None]), ValueError, r"colors: expected one colour"),
     (lambda: Scene([("t", TRIANGLE)], [POINT], colors=[(2, 0, 0)]), ValueError, r"colors\[0\]: expected RGB .* \[0, 1\]"),
-    (lambda: Scene([("t", TRIANGLE)], [POINT], render_size=(0, 10)), ValueError, r"render_size\[0\]: must be at least 1"),
+    (lambda: Scene([("t", TRIANGLE)], [POINT], render_size=(0, 10)), ValueError, r"render_size\[0\]: must be between 1 and 16384"),
 ]
 
 
@@ -324,7 +324,7 @@ BAD_FILES = [
     (OBJECT + "box = { sise = 1 }\n", ValueError, r"objects\[0\]\.box\.sise: unknown key; allowed here: size, center"),
     (OBJECT + 'sphere = { radius = "big" }\n', TypeError, r"objects\[0\]\.sphere\.radius: expected a number, got a string"),
     (OBJECT + "sphere = { radius = -1 }\n", ValueError, r"objects\[0\]\.sphere\.radius: must be positive, got -1"),
-    (OBJECT + "sphere = { segments = 2 }\n", ValueError, r"objects\[0\]\.sphere\.segments: must be at least 3, got 2"),
+    (OBJECT + "sphere = { segments = 2 }\n", ValueError, r"objects\[0\]\.sphere\.segments: must be between 3 and 2048, got 2"),
     (OBJECT + "sphere = { segments = 8.0 }\n", TypeError,
      r"objects\[0\]\.sphere\.segments: expected an integer, got a float"),
     (OBJECT + 'box = { center = "yes" }\n', TypeError, r"objects\[0\]\.box\.center: expected true or false, got a string"),
@@ -364,17 +364,46 @@ BAD_FILES = [
     (BOX + LIGHT + "[camera]\nposition = [0, 1, 0]\n", ValueError, r"camera\.target: missing"),
     (BOX + LIGHT + "[camera]\nposition = [0, 1, 5]\ntarget = [0, 1, 0]\nfov = 0\n", ValueError,
      r"camera\.fov: must be positive"),
-    (BOX + LIGHT + "[render]\nwidth = 0\nheight = 10\n", ValueError, r"render\.width: must be at least 1, got 0"),
+    (BOX + LIGHT + "[render]\nwidth = 0\nheight = 10\n", ValueError, r"render\.width: must be between 1 and 16384, got 0"),
     ("name = 3\n" + BOX + LIGHT, TypeError, r"name: expected a string, got an integer"),
     (BOX + "[[lights]\n", ValueError, r"Expected ']]' .*\(at line 3"),  # TOML syntax error, with its position
+    # sizes: bounded before manifold3d or the tessellation allocates anything
+    (OBJECT + "sphere = { segments = 2000000000 }\n", ValueError,
+     r"objects\[0\]\.sphere\.segments: must be between 3 and 2048, got 2000000000"),
+    (OBJECT + "union = [{ cylinder = { segments = 1000000 } }]\n", ValueError,
+     r"objects\[0\]\.union\[0\]\.cylinder\.segments: must be between 3 and 524289, got 1000000"),
+    (OBJECT + "subdivision = { vertices = [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [2, 0, 0], [2, 1, 0]], "
+              "faces = [[0, 1, 2, 3], [1, 4, 5, 2]] }\ntessellation = 1025\n", ValueError,
+     r"objects\[0\]: segments: must be between 1 and 1024, got 1025"),
+    (OBJECT + "subdivision = { vertices = [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [2, 0, 0], [2, 1, 0], [3, 0, 0], "
+              "[3, 1, 0]], faces = [[0, 1, 2, 3], [1, 4, 5, 2], [4, 6, 7, 5]] }\ntessellation = 1024\n", ValueError,
+     r"objects\[0\]: segments: 1024 per control edge make 3,145,728 cells"),
+    (OBJECT + "union = [" + ", ".join(["{ sphere = { segments = 2048 } }"] * 5) + "]\n", ValueError,
+     r"objects: the spheres and cylinders would make about 10,485,760 triangles; at most 8,388,608 in one scene"),
+    (OBJECT + "box = { size = 1e300 }\n", ValueError, r"objects\[0\]: vertices: coordinates overflow float32"),
+    (OBJECT + 'mesh = "good.obj"\nscale = 1e300\n', ValueError, r"objects\[0\]: vertices: coordinates overflow float32"),
+    (OBJECT + 'mesh = "bad.obj"\n', ValueError, r"objects\[0\]\.mesh: path: .*bad\.obj: line 2: expected three numbers"),
+    (BOX + LIGHT + "[render]\nwidth = 100000000000000000000\nheight = 10\n", ValueError,
+     r"render\.width: must be between 1 and 16384, got 100000000000000000000"),
 ]
 
 
 @pytest.mark.parametrize("text, error, message", BAD_FILES, ids=[m for _, _, m in BAD_FILES])
 def test_bad_scene_file_is_named(tmp_path, text, error, message):
     (tmp_path / "model.xyz").write_text("not a mesh")
+    (tmp_path / "bad.obj").write_text("v 0 0 0\nv 1 0 x\nv 0 1 0\nf 1 2 3\n")
+    (tmp_path / "good.obj").write_text(TETRAHEDRON_OBJ)
     with pytest.raises(error, match=r"scene\.toml: " + message):
         load_text(tmp_path, text)
+
+
+def test_scene_path_that_is_not_a_path_or_not_utf8_is_named(tmp_path):
+    with pytest.raises(TypeError, match=r"^path: expected a file path, got NoneType$"):
+        Scene.load(None)
+    path = tmp_path / "latin.toml"
+    path.write_bytes("# caf\xe9\n".encode("latin-1") + (LIGHT + BOX).encode())
+    with pytest.raises(ValueError, match=r"latin\.toml: not UTF-8 text \(TOML must be\): byte 5"):
+        Scene.load(path)
 
 
 def test_missing_scene_file_is_named(tmp_path):

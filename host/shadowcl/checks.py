@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 
 
@@ -30,7 +32,9 @@ def finite_array(name: str, value, shape_tail: tuple[int, ...], dtype=np.float64
 def vector3(name: str, value, nonzero: bool = False) -> np.ndarray:
     """``value`` as a finite float64 3-vector (non-zero length if asked)."""
     try:
-        array = np.asarray(value, dtype=np.float64)
+        array = np.array(value, dtype=np.float64)   # a copy: stored vectors never share the caller's buffer
+    except OverflowError:
+        raise ValueError(f"{name}: {value!r} is beyond the floating-point range") from None
     except (TypeError, ValueError):
         raise TypeError(f"{name}: expected three numbers, got {value!r}") from None
     if array.shape != (3,):
@@ -55,23 +59,32 @@ def non_negative_float(name: str, value) -> float:
     """``value`` as a finite float >= 0 (numbers only: strings are refused, not parsed)."""
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise TypeError(f"{name}: expected a number, got {type(value).__name__}")
-    if not (np.isfinite(value) and value >= 0):
+    number = _as_float(name, value)
+    if not (np.isfinite(number) and number >= 0):
         raise ValueError(f"{name}: must be a finite non-negative number, got {value!r}")
-    return float(value)
+    return number
+
+
+def _as_float(name: str, value) -> float:
+    """A number as a float; an integer beyond the float range is a ValueError, not an OverflowError."""
+    try:
+        return float(value)
+    except OverflowError:
+        raise ValueError(f"{name}: {value} is beyond the floating-point range") from None
 
 
 def positive_float(name: str, value) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise TypeError(f"{name}: expected a number, got {value!r}")
-    number = float(value)
+    number = _as_float(name, value)
     if not (np.isfinite(number) and number > 0):
         raise ValueError(f"{name}: must be a finite positive number, got {value!r}")
     return number
 
 
 def check_bounds(name: str, bounds) -> np.ndarray:
-    """A (2, 3) finite float64 box with low <= high."""
-    box = finite_array(name, bounds, (3,))
+    """A (2, 3) finite float64 box with low <= high (a copy: boxes are stored)."""
+    box = finite_array(name, bounds, (3,)).copy()
     if box.shape != (2, 3):
         raise ValueError(f"{name}: expected shape (2, 3) (low and high corners), got {box.shape}")
     if np.any(box[0] > box[1]):
@@ -85,8 +98,11 @@ def optional_int(name: str, value, minimum: int = 1, maximum: int | None = None)
 
 
 def choice(name: str, value, choices: tuple):
-    """``value`` if it is one of ``choices`` and of the same type (1.0 == 1 would otherwise pass)."""
-    if isinstance(value, bool) or type(value) not in {type(c) for c in choices} or value not in choices:
+    """``value`` if it is one of ``choices`` and of the same type (1.0 == 1 would otherwise pass, and
+    reach a kernel build as ``-DX=1.0``); a NumPy integer counts as the Python int it holds."""
+    if isinstance(value, np.integer):
+        value = int(value)
+    if isinstance(value, (bool, np.bool_)) or type(value) not in {type(c) for c in choices} or value not in choices:
         raise ValueError(f"{name}: expected one of {', '.join(map(repr, choices))}, got {value!r}")
     return value
 
@@ -96,3 +112,62 @@ def flag(name: str, value) -> bool:
     if not isinstance(value, (bool, np.bool_)):
         raise TypeError(f"{name}: expected a bool, got {type(value).__name__}")
     return bool(value)
+
+
+def available_host_bytes() -> int | None:
+    """Memory this process can still get: the least of the host's (Linux's MemAvailable, else free
+    physical pages), its cgroup's room and its address-space limit's room; None where none is known."""
+    figures = [_host_free(), _cgroup_room(), _address_space_room()]
+    known = [figure for figure in figures if figure is not None]
+    return max(min(known), 0) if known else None
+
+
+def _host_free() -> int | None:
+    try:
+        with open("/proc/meminfo") as meminfo:
+            for line in meminfo:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_AVPHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def _cgroup_room() -> int | None:
+    """A container's memory limit less its use (cgroup v2, else v1); None when unlimited or unknown."""
+    for limit_file, usage_file in (("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory.current"),
+                                   ("/sys/fs/cgroup/memory/memory.limit_in_bytes",
+                                    "/sys/fs/cgroup/memory/memory.usage_in_bytes")):
+        try:
+            with open(limit_file) as limit, open(usage_file) as usage:
+                text = limit.read().strip()
+                if text == "max" or int(text) >= 1 << 60:
+                    return None
+                return int(text) - int(usage.read())
+        except (OSError, ValueError):
+            continue
+    return None
+
+
+def _address_space_room() -> int | None:
+    """``ulimit -v`` less this process's virtual size; None when unlimited or unknown."""
+    try:
+        import resource
+
+        limit = resource.getrlimit(resource.RLIMIT_AS)[0]
+        if limit == resource.RLIM_INFINITY:
+            return None
+        with open("/proc/self/statm") as statm:
+            return limit - int(statm.read().split()[0]) * os.sysconf("SC_PAGE_SIZE")
+    except (ImportError, OSError, ValueError, IndexError):
+        return None
+
+
+def check_memory(name: str, what: str, needed: int, available: int | None, where: str) -> None:
+    """ValueError naming ``name`` when ``what`` needs more than the ``available`` bytes of ``where``."""
+    if available is not None and needed > available:
+        raise ValueError(f"{name}: {what} needs about {needed / 2**30:.2f} GiB but {where} has "
+                         f"{available / 2**30:.2f} GiB available; make it smaller")

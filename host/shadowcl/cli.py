@@ -6,6 +6,8 @@ from __future__ import annotations
 import argparse
 import ast
 import contextlib
+import os
+import re
 import sys
 import time
 from pathlib import Path
@@ -37,8 +39,15 @@ def parse_param(text: str) -> tuple[str, object]:
         return name, value
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with usage errors as one line on stderr (exit code 2), like every other error."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="shadowcl", description="Hard shadows with OpenCL.")
+    parser = _Parser(prog="shadowcl", description="Hard shadows with OpenCL.")
     commands = parser.add_subparsers(dest="command", required=True)
 
     render = commands.add_parser("render", help="render a scene file to a PNG")
@@ -78,18 +87,23 @@ def run_render(args) -> int:
 
     started = time.perf_counter()
     scene = Scene.load(args.scene)
+    # the scene's name comes from its file: no separators or '..' into the default output path
+    out = args.out or Path(re.sub(r"[^\w.-]|\.\.", "_", f"shadowcl-{scene.name}-{args.method}") + ".png")
+    _check_writable(out)
     load_time = time.perf_counter() - started
     width, height = args.size or (None, None)
     stages = ["raster", "receivers"] + ["prepare", "classify"] * len(scene.lights) + ["shading"]
-    with tqdm(total=len(stages), desc=f"render {scene.name}", unit="stage", leave=False) as bar:
+    # disable=None: no bar when stderr is not a terminal, so an error there is the only line
+    with tqdm(total=len(stages), desc=f"render {scene.name}", unit="stage", leave=False, disable=None) as bar:
         def progress(stage):
             bar.set_postfix_str(stage)
             bar.update(1)
 
         result = render_report(scene, args.method, width, height, get_device(args.device), progress=progress, **dict(args.param))
-    out = args.out or Path(f"shadowcl-{scene.name}-{args.method}.png")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    Image.fromarray(result.image).save(out)
+    try:
+        Image.fromarray(result.image).save(out)
+    except OSError as error:
+        raise ValueError(f"--out: cannot write {out}: {error.strerror or error}") from None
 
     height, width = result.image.shape[:2]
     shadowed = result.shadow.any(axis=0).mean() if result.shadow.size else 0.0
@@ -100,11 +114,30 @@ def run_render(args) -> int:
     return 0
 
 
+def _check_writable(out: Path) -> None:
+    """Make ``out``'s folder and check a PNG can be written there, before any rendering is done."""
+    from PIL import Image
+
+    if out.suffix.lower() not in Image.registered_extensions():
+        raise ValueError(f"--out: {out.suffix or 'no suffix'!r} is not an image format Pillow writes (use .png)")
+    if out.is_dir():
+        raise ValueError(f"--out: {out} is a folder")
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError):
+        raise ValueError(f"--out: cannot make the folder {out.parent}: a file is in the way") from None
+    except OSError as error:
+        raise ValueError(f"--out: cannot make the folder {out.parent}: {error.strerror or error}") from None
+    if not os.access(out.parent, os.W_OK) or (out.exists() and not os.access(out, os.W_OK)):
+        raise ValueError(f"--out: cannot write {out}: permission denied")
+
+
 def run_sun_hours(args) -> int:
     from .scene import Scene
     from .sunhours import sun_hours, write
 
     scene = Scene.load(args.scene)
+    _check_writable(args.out)
     site = dict(scene.sun or {})
     given = dict(latitude=args.lat, longitude=args.lon, start=args.start, end=args.end, step=args.step)
     site.update({key: value for key, value in given.items() if value is not None})
@@ -172,8 +205,10 @@ def main(argv=None) -> int:
         if args.command == "devices":
             return run_devices()
         return run_methods()
-    except (ValueError, TypeError, FileNotFoundError, RuntimeError) as error:
-        print(f"shadowcl: error: {error}", file=sys.stderr)
+    except (ValueError, TypeError, OSError, RuntimeError, MemoryError) as error:
+        # one line, even for a message that lists things (the devices, say) on lines of its own
+        message = "; ".join(line.strip() for line in str(error).splitlines() if line.strip()).replace(":; ", ": ")
+        print(f"shadowcl: error: {message}", file=sys.stderr)
         return 2
 
 

@@ -22,9 +22,13 @@ import numpy as np
 import pyopencl as cl
 
 from . import kernels as _kernel_package
+from .checks import available_host_bytes, check_memory
 
 # kernels/ is installed as the package shadowcl.kernels (see setup.cfg), editable or not.
 KERNEL_DIR = Path(_kernel_package.__file__).resolve().parent
+# Buffers from this size up are checked against the host's free memory on a CPU device (reading it costs
+# ~20 us, nothing beside allocating and touching this much).
+HOST_CHECKED_BYTES = 64 << 20
 
 NO_PLATFORM_MESSAGE = (
     "shadowcl found no OpenCL platform. Install PoCL's CPU driver with "
@@ -100,15 +104,19 @@ def _default_device() -> cl.Device:
     devices = [device for _, _, device in list_devices()]
     if not devices:
         raise RuntimeError(NO_PLATFORM_MESSAGE)
-    cpus = [device for device in devices if device.type & cl.device_type.CPU]
-    return (cpus or devices)[0]
+    # A GPU when there is one (the kernels are written to run there too), else a CPU (PoCL), else any
+    for kind in (cl.device_type.GPU, cl.device_type.CPU):
+        of_kind = [device for device in devices if device.type & kind]
+        if of_kind:
+            return of_kind[0]
+    return devices[0]
 
 
 class Device:
     """One OpenCL device with its context, in-order queue, and built programs.
 
     ``Device()`` picks, in order: ``SHADOWCL_DEVICE`` or ``PYOPENCL_CTX`` (``"P:D"`` indices or a
-    name substring), else the first CPU device, else any device. ``Device("pthread")`` or
+    name substring), else the first GPU, else the first CPU device, else any device. ``Device("pthread")`` or
     ``Device(cl_device)`` picks explicitly. ``kernel_dir`` replaces the shipped kernels folder (tests).
     Kernel objects are shared and carry their arguments, so use one Device from one thread at a time
     (builds are locked; launches are not).
@@ -192,6 +200,9 @@ class Device:
                 f"{what}: needs {nbytes / 2**20:.0f} MiB in one buffer but {self.name} allows at most "
                 f"{self.max_alloc_bytes / 2**20:.0f} MiB; lower the resolution"
             )
+        if nbytes >= HOST_CHECKED_BYTES and self.cl_device.type & cl.device_type.CPU:
+            # a CPU device's buffers are host memory, and PoCL crashes (not fails) when the host runs out
+            check_memory(what, f"a {nbytes / 2**20:.0f} MiB buffer", nbytes, available_host_bytes(), "the host")
         return cl.Buffer(self.context, cl.mem_flags.READ_WRITE, nbytes)
 
     def scratch(self, key: str, nbytes: int) -> cl.Buffer:

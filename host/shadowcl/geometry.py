@@ -3,13 +3,11 @@
 from __future__ import annotations
 
 from functools import cached_property
-from pathlib import Path
 
 import numpy as np
 
 from .checks import finite_array
-
-MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off")
+from .meshio import read_polygons
 
 
 class Mesh:
@@ -17,7 +15,8 @@ class Mesh:
 
     Inputs are validated (finite coordinates, integer indices within range, the right shapes, at least
     one triangle). Degenerate triangles (zero area, repeated indices) are allowed: they cast no shadow,
-    and :attr:`degenerate_count` says how many there are.
+    and :attr:`degenerate_count` says how many there are. The mesh keeps read-only copies of its
+    inputs: the caller's arrays are neither shared nor changed.
     """
 
     def __init__(self, vertices, faces):
@@ -39,26 +38,22 @@ class Mesh:
             raise ValueError(f"faces: negative vertex index {low}")
         if high >= len(vertices):
             raise ValueError(f"faces: vertex index {high} out of range for {len(vertices)} vertices")
+        if high > np.iinfo(np.int32).max:   # faces are stored int32: a larger index would wrap silently
+            raise ValueError(f"faces: vertex index {high} does not fit int32; at most 2^31 vertices are used")
         if np.abs(vertices).max() >= np.finfo(np.float32).max:
             raise ValueError("vertices: coordinates overflow float32")
-        self.vertices = np.ascontiguousarray(vertices, dtype=np.float32)
-        self.faces = np.ascontiguousarray(faces_in, dtype=np.int32)
+        self.vertices = np.array(vertices, dtype=np.float32, order="C")   # copies: never the caller's buffer
+        self.faces = np.array(faces_in, dtype=np.int32, order="C")
         for array in (self.vertices, self.faces):
             array.flags.writeable = False
 
     @classmethod
     def load(cls, path) -> "Mesh":
-        """Read an OBJ, PLY, STL or OFF file (through trimesh); polygons are fan-triangulated."""
-        import trimesh
-
-        path = Path(path)
-        if path.suffix.lower() not in MESH_SUFFIXES:
-            raise ValueError(f"path: unsupported mesh format {path.suffix!r}; expected one of {MESH_SUFFIXES}")
-        if not path.is_file():
-            raise FileNotFoundError(f"path: no mesh file at {path}")
-        # process=False keeps vertices and faces as written (no merging, no removal of degenerates).
-        loaded = trimesh.load(path, force="mesh", process=False)
-        return cls(np.asarray(loaded.vertices), np.asarray(loaded.faces))
+        """Read an OBJ, PLY (ASCII or binary), STL (ASCII or binary) or OFF file, kept as written (no
+        merging, no removal of degenerates); polygons are fan-triangulated. A malformed file raises
+        ValueError naming the file and, for text, the line (see :mod:`shadowcl.meshio`)."""
+        polygons = read_polygons(path)
+        return cls(polygons.vertices, polygons.triangles())
 
     def __repr__(self) -> str:
         return f"Mesh({len(self.vertices)} vertices, {len(self.faces)} triangles)"

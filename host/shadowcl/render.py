@@ -9,6 +9,7 @@ image, Williams' post-filter of the shadow image.
 
 from __future__ import annotations
 
+import copy
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -16,13 +17,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import raster
-from .checks import positive_int
+from .checks import available_host_bytes, check_memory, positive_int
 from .device import get_device
 from .geometry import bounds_diagonal
 from .lights import check_light, same_light
 from .methods import method_class, resolve_eps, with_receiver_count
 from .points import check_points
-from .scene import Scene
+from .scene import MAX_RENDER_SIDE, Scene
 from .shadows import Shadows
 from .views import Camera
 
@@ -30,7 +31,15 @@ AMBIENT = 0.18
 BACKGROUND_TOP = np.array([0.60, 0.70, 0.85])
 BACKGROUND_BOTTOM = np.array([0.92, 0.93, 0.95])
 DEFAULT_SIZE = (960, 540)
-MAX_SIDE = 16384
+MAX_SIDE = MAX_RENDER_SIDE
+# Peak memory a frame takes per pixel, checked before anything is allocated. Host: the peak RSS slope
+# between 512^2 and 1536^2 frames of the default scene was 235-262 bytes a pixel (exact, shadow_map,
+# shadow_volume, angular; PoCL's buffers included, they live in host memory) plus ~5.5 per extra light.
+# Device: the raster's depth, triangle, point and normal images (32) and the method's copy of the
+# receivers, counted from the buffer sizes, not measured on a GPU.
+HOST_BYTES_PER_PIXEL = 300
+HOST_BYTES_PER_PIXEL_PER_LIGHT = 8
+DEVICE_BYTES_PER_PIXEL = 64
 
 
 @dataclass
@@ -64,9 +73,20 @@ def _timed(timings: dict[str, float], stage: str, progress):
 
 def render_size(scene, width, height) -> tuple[int, int]:
     default = getattr(scene, "render_size", None) or DEFAULT_SIZE
-    width = default[0] if width is None else positive_int("width", width, maximum=MAX_SIDE)
-    height = default[1] if height is None else positive_int("height", height, maximum=MAX_SIDE)
+    width = positive_int("width", default[0] if width is None else width, maximum=MAX_SIDE)
+    height = positive_int("height", default[1] if height is None else height, maximum=MAX_SIDE)
     return width, height
+
+
+def check_frame_memory(width: int, height: int, lights: int, device) -> None:
+    """ValueError when a ``width`` x ``height`` frame with ``lights`` lights does not fit the host's or
+    the device's free memory (estimates above), before anything is allocated."""
+    pixels = width * height
+    what = f"a {width} x {height} frame with {lights} light(s)"
+    host = pixels * (HOST_BYTES_PER_PIXEL + HOST_BYTES_PER_PIXEL_PER_LIGHT * lights)
+    check_memory("width, height", what, host, available_host_bytes(), "the host")
+    check_memory("width, height", what, pixels * DEVICE_BYTES_PER_PIXEL, int(device.cl_device.global_mem_size),
+                 f"device {device.name}")
 
 
 def camera_view(scene, width: int, height: int, camera=None):
@@ -107,8 +127,9 @@ class Renderer:
         self.eps = resolve_eps(self.method_class, eps, scene.bounds)
         self._eps_given = eps        # passed on as given: Shadows resolves it the same way (scene.bounds is the mesh's)
         self.device = get_device(device)
+        check_frame_memory(self.width, self.height, len(scene.lights), self.device)
         self.method_class(self.device, **params)          # bad parameters raise here, not at the first frame
-        self._params = params
+        self._params = copy.deepcopy(params)   # kept for later slots: never the caller's arrays
         self._progress = progress
         self._slots: list[Shadows] = []
         self._camera = None                               # (view, zbuffer, seen, receiver points) of the last camera
@@ -124,6 +145,7 @@ class Renderer:
         if not lights:
             raise ValueError("light: expected a light or a non-empty list of lights")
         lights = [check_light(one) for one in lights]
+        check_frame_memory(self.width, self.height, len(lights), self.device)
         if camera is not None and not isinstance(camera, Camera):
             raise TypeError(f"camera: expected a shadowcl.Camera or None, got {type(camera).__name__}")
         timings: dict[str, float] = {}
@@ -151,13 +173,12 @@ class Renderer:
             shadow = np.zeros((len(lights), len(points)), dtype=bool)
             visibility = np.ones(shadow.shape, dtype=np.float32)
             for index, slot in enumerate(slots):
-                instance = slot._instance
                 with stage("classify"):
-                    if instance.image_space:
-                        shadow[index] = instance.classify_view(view, zbuffer, seen)
+                    if self.method_class.image_space:
+                        shadow[index] = slot.classify_view(view, zbuffer, seen)
                         visibility[index] = ~shadow[index]
                     else:     # binary methods give 0 or 1, so the threshold is their own mask
-                        visibility[index] = instance.visibility(points)
+                        visibility[index] = slot.visibility(points)
                         shadow[index] = visibility[index] < 0.5
             with stage("shading"):
                 if self.post_filter:

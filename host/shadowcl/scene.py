@@ -33,22 +33,24 @@ A shape table holds exactly one shape key, and optionally ``scale`` (a number or
 ``rotate`` (degrees about the world x, then y, then z axis) and ``translate``, applied in that order:
 scale, rotate, translate. The shape keys (primitive parameters are optional, defaults shown)::
 
-    sphere = { radius = 1, segments = 32 }            # segments round up to a multiple of 4
+    sphere = { radius = 1, segments = 32 }            # segments round up to a multiple of 4, at most 2048
     box = { size = [1, 1, 1], center = false }        # size may be one number; corner at the origin
-    cylinder = { height = 1, radius = 1, radius_top = 1, segments = 32, center = false }
+    cylinder = { height = 1, radius = 1, radius_top = 1, segments = 32, center = false }   # segments <= 524289
                                                       # along z from z = 0; radius_top defaults to
                                                       # radius, 0 makes a cone; stand it up along y
                                                       # with rotate = [-90, 0, 0]
     union = [shape, ...]                              # CSG: each item is a shape table (primitive
     difference = [shape, minus, ...]                  # or CSG, with its own transforms); TOML's
-    intersection = [shape, ...]                       # [[objects.union]] tables work too
+    intersection = [shape, ...]                       # [[objects.union]] tables work too; nested at
+                                                      # most 64 deep
     mesh = "models/bunny.obj"                         # OBJ/PLY/STL/OFF, relative to the scene file
                                                       # (~ and absolute paths allowed)
     triangles = { vertices = [[x, y, z], ...], faces = [[i, j, k], ...] }
     subdivision = "models/cage.obj"                   # a Catmull-Clark control mesh (OBJ, any polygons)
     subdivision = { vertices = [[x, y, z], ...], faces = [[i, j, k, l], ...] }   # inline control mesh
     tessellation = 8                                  # subdivision only: segments per control edge
-                                                      # (default: SubdivisionSurface.default_segments)
+                                                      # (default: SubdivisionSurface.default_segments;
+                                                      # at most MAX_TESSELLATION_CELLS cells)
 
 For sun-hours studies (``shadowcl sun-hours``, :mod:`shadowcl.sun`), optionally::
 
@@ -98,10 +100,23 @@ from manifold3d import Manifold
 from .checks import positive_int, vector3
 from .geometry import Mesh, bounds_diagonal
 from .lights import DirectionalLight, PointLight
+from .meshio import path_argument
 from .subdivision import SubdivisionSurface
 from .views import Camera
 
 DEFAULT_SEGMENTS = 32
+# Most triangles one sphere or cylinder may have: manifold3d's 2048-segment sphere (2,097,152 triangles)
+# took 5 s and 0.8 GB here; 2e9 segments crash it. A sphere of n segments has n^2 / 2 triangles, a
+# cylinder 4 n - 4.
+MAX_PRIMITIVE_TRIANGLES = 1 << 21
+MAX_SPHERE_SEGMENTS = int(np.sqrt(2 * MAX_PRIMITIVE_TRIANGLES))
+MAX_CYLINDER_SEGMENTS = (MAX_PRIMITIVE_TRIANGLES + 4) // 4
+# ... and all of a scene file's primitives together (CSG keeps its operands until it combines them).
+MAX_SCENE_PRIMITIVE_TRIANGLES = 1 << 23
+# Largest image side a scene may ask renderers for (render.MAX_SIDE is this).
+MAX_RENDER_SIDE = 16384
+# Deepest CSG nesting read from a file: far beyond any real scene, well within Python's recursion limit.
+MAX_CSG_DEPTH = 64
 DEFAULT_FOV = 45.0
 # From the scene's centre towards the default camera: to the right (+x), above (+y), in front (+z).
 DEFAULT_VIEW_DIRECTION = (1.0, 0.8, 1.4)
@@ -162,12 +177,20 @@ class Scene:
     @classmethod
     def load(cls, path) -> "Scene":
         """Read a scene file (format in the module docstring); errors name the file and key path."""
-        path = Path(path)
+        path = path_argument("path", path)
         with _located(str(path)):
             if not path.is_file():
                 raise FileNotFoundError("no such scene file")
-            with path.open("rb") as file:
-                document = tomllib.load(file)
+            try:
+                data = path.read_bytes()
+            except OSError as error:
+                raise ValueError(f"cannot be read ({error.strerror})") from None
+            try:
+                document = tomllib.loads(data.decode("utf-8"))
+            except UnicodeDecodeError as error:
+                raise ValueError(f"not UTF-8 text (TOML must be): byte {error.start}") from None
+            except RecursionError:
+                raise ValueError("arrays or inline tables nested too deep for the TOML parser") from None
             return _read_scene(_Table(document, ""), path)
 
     @property
@@ -223,10 +246,11 @@ def _tessellated(objects) -> tuple:
     out, surfaces = [], []
     for index, item in enumerate(objects):
         if isinstance(item, tuple) and len(item) in (2, 3) and isinstance(item[1], SubdivisionSurface):
-            if len(item) == 3 and item[2] is not None:
-                mesh = item[1].tessellate(segments=positive_int(f"objects[{index}] segments", item[2]))
-            else:
-                mesh = item[1].tessellate()
+            with _located(f"objects[{index}]"):   # e.g. too many segments for the control mesh
+                if len(item) == 3 and item[2] is not None:
+                    mesh = item[1].tessellate(segments=positive_int("segments", item[2]))
+                else:
+                    mesh = item[1].tessellate()
             surfaces.append((item[0], item[1]))
             item = (item[0], mesh)
         out.append(item)
@@ -266,7 +290,8 @@ def _rgb(name: str, value) -> np.ndarray:
 def _checked_size(size) -> tuple[int, int]:
     if not (isinstance(size, (list, tuple)) and len(size) == 2):
         raise TypeError(f"render_size: expected (width, height), got {size!r}")
-    return positive_int("render_size[0]", size[0]), positive_int("render_size[1]", size[1])
+    return (positive_int("render_size[0]", size[0], maximum=MAX_RENDER_SIDE),
+            positive_int("render_size[1]", size[1], maximum=MAX_RENDER_SIDE))
 
 
 # ---- reading scene files ----
@@ -340,13 +365,13 @@ class _Table:
             raise self.invalid(key, f"must be positive, got {value}")
         return float(value)
 
-    def integer(self, key: str, default=_REQUIRED, minimum: int = 1) -> int:
+    def integer(self, key: str, default=_REQUIRED, minimum: int = 1, maximum: int | None = None) -> int:
         if self._absent(key, default):
             return default
         value = self.data[key]
         if not isinstance(value, int) or isinstance(value, bool):
             raise TypeError(f"{self.path(key)}: expected an integer, got {_toml_type(value)}")
-        return positive_int(self.path(key), value, minimum=minimum)
+        return positive_int(self.path(key), value, minimum=minimum, maximum=maximum)
 
     def flag(self, key: str, default=_REQUIRED) -> bool:
         return self._typed(key, default, bool, "true or false")
@@ -389,7 +414,7 @@ class _Table:
 def _sphere(params: _Table):
     params.allow_only(("radius", "segments"))
     radius = params.number("radius", 1.0, positive=True)
-    return Manifold.sphere(radius, params.integer("segments", DEFAULT_SEGMENTS, minimum=3))
+    return Manifold.sphere(radius, params.integer("segments", DEFAULT_SEGMENTS, minimum=3, maximum=MAX_SPHERE_SEGMENTS))
 
 
 def _box(params: _Table):
@@ -410,7 +435,7 @@ def _cylinder(params: _Table):
         params.number("height", 1.0, positive=True),
         radius,
         radius_top,
-        params.integer("segments", DEFAULT_SEGMENTS, minimum=3),
+        params.integer("segments", DEFAULT_SEGMENTS, minimum=3, maximum=MAX_CYLINDER_SEGMENTS),
         params.flag("center", False),
     )
 
@@ -430,6 +455,10 @@ SENSOR_KEYS = ("name", "objects", "spacing", "offset")
 
 def _read_scene(root: _Table, path: Path) -> Scene:
     root.allow_only(SCENE_KEYS)
+    triangles = _primitive_triangles(root.data.get("objects"))
+    if triangles > MAX_SCENE_PRIMITIVE_TRIANGLES:
+        raise root.invalid("objects", f"the spheres and cylinders would make about {triangles:,} triangles; "
+                                      f"at most {MAX_SCENE_PRIMITIVE_TRIANGLES:,} in one scene")
     objects, colors = [], []
     for table in root.tables("objects"):
         name, shape, color = _read_object(table, path.parent)
@@ -485,6 +514,26 @@ def _read_sensors(table: _Table, object_names: list) -> dict:
             "spacing": table.number("spacing", positive=True), "offset": offset}
 
 
+def _primitive_triangles(value) -> int:
+    """Triangles the spheres and cylinders anywhere in a TOML value would make, counted before any is
+    built; a bad ``segments`` counts nothing here (reading the shape names it)."""
+    total, stack = 0, [value]
+    while stack:   # a loop, not recursion: [[objects.union.union...]] tables nest without bound
+        item = stack.pop()
+        if isinstance(item, list):
+            stack.extend(item)
+        elif isinstance(item, dict):
+            for key, inner in item.items():
+                segments = inner.get("segments", DEFAULT_SEGMENTS) if isinstance(inner, dict) else None
+                limit = {"sphere": MAX_SPHERE_SEGMENTS, "cylinder": MAX_CYLINDER_SEGMENTS}.get(key, 0)
+                if isinstance(segments, int) and 3 <= segments <= limit:
+                    rounded = -(-segments // 4) * 4   # manifold3d rounds a sphere's segments up to a multiple of 4
+                    total += rounded ** 2 // 2 if key == "sphere" else 4 * segments - 4
+                else:
+                    stack.append(inner)
+    return total
+
+
 def _read_camera(table: _Table) -> Camera:
     table.allow_only(("position", "target", "up", "fov"))
     position, target = table.vector("position"), table.vector("target")
@@ -506,7 +555,7 @@ def _read_light(table: _Table):
 
 def _read_render_size(table: _Table) -> tuple[int, int]:
     table.allow_only(("width", "height"))
-    return table.integer("width"), table.integer("height")
+    return table.integer("width", maximum=MAX_RENDER_SIDE), table.integer("height", maximum=MAX_RENDER_SIDE)
 
 
 def _read_object(table: _Table, base_dir: Path) -> tuple[str, "Mesh | tuple", np.ndarray | None]:
@@ -537,14 +586,19 @@ def _shape_key(table: _Table) -> str:
 def _build_shape(table: _Table, kind: str, base_dir: Path) -> Mesh:
     """The transformed mesh of a shape table whose shape key is ``kind``."""
     if kind == "mesh":
-        return _mesh_file(table, base_dir).transformed(_transform_matrix(table))
-    if kind == "triangles":
-        return _inline_triangles(table.table("triangles")).transformed(_transform_matrix(table))
-    solid = _build_solid(table, kind)
-    if solid.is_empty():
-        raise ValueError(f"{table.where}: the shape is empty (manifold3d status: {solid.status().name})")
-    result = solid.to_mesh64()
-    return Mesh(np.asarray(result.vert_properties)[:, :3], np.asarray(result.tri_verts))
+        mesh = _mesh_file(table, base_dir)
+    elif kind == "triangles":
+        mesh = _inline_triangles(table.table("triangles"))
+    else:
+        solid = _build_solid(table, kind)
+        if solid.is_empty():
+            raise ValueError(f"{table.where}: the shape is empty (manifold3d status: {solid.status().name})")
+        result = solid.to_mesh64()
+        with _located(table.where):   # e.g. a size beyond float32
+            return Mesh(np.asarray(result.vert_properties)[:, :3], np.asarray(result.tri_verts))
+    matrix = _transform_matrix(table)
+    with _located(table.where):       # e.g. a scale that takes the mesh beyond float32
+        return mesh.transformed(matrix)
 
 
 def _mesh_file(table: _Table, base_dir: Path) -> Mesh:
@@ -579,12 +633,14 @@ def _inline_triangles(table: _Table) -> Mesh:
         return Mesh(vertices, faces)
 
 
-def _build_solid(table: _Table, kind: str):
-    """The transformed manifold3d solid of a primitive or CSG shape table."""
+def _build_solid(table: _Table, kind: str, depth: int = 0):
+    """The transformed manifold3d solid of a primitive or CSG shape table ``depth`` CSG levels down."""
     if kind in PRIMITIVES:
         solid = PRIMITIVES[kind](table.table(kind))
     elif kind in CSG_OPERATORS:
-        solid = _combine(table, kind)
+        if depth >= MAX_CSG_DEPTH:
+            raise table.invalid(kind, f"CSG nested more than {MAX_CSG_DEPTH} deep")
+        solid = _combine(table, kind, depth + 1)
     else:
         raise table.invalid(
             kind, "inline triangles, mesh files and subdivision surfaces cannot be used in CSG "
@@ -593,14 +649,14 @@ def _build_solid(table: _Table, kind: str):
     return solid.transform(_transform_matrix(table)[:3])
 
 
-def _combine(table: _Table, operation: str):
+def _combine(table: _Table, operation: str, depth: int):
     items = table.tables(operation)
     if not items:
         raise table.invalid(operation, "expected at least one shape table")
     solids = []
     for item in items:
         item.allow_only(SHAPE_KEYS + TRANSFORM_KEYS)
-        solids.append(_build_solid(item, _shape_key(item)))
+        solids.append(_build_solid(item, _shape_key(item), depth))
     return reduce(CSG_OPERATORS[operation], solids)
 
 
