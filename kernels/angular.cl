@@ -234,7 +234,8 @@ INLINE void face_span(float x0, float y0, float z0, float x1, float y1, float z1
 }
 
 /* fill_rows: one work-item per table face; writes its record in every row it spans, at the row's
- * offset plus a slot taken from the row's cursor (offsets from the exclusive prefix sum of counts). */
+ * offset plus a slot taken from the row's cursor (offsets from the exclusive prefix sum of counts). A slot
+ * past the row's end is not written; the cursor still counts it and the host checks (check_rows_filled). */
 __kernel void fill_rows(const __global float *vertices, const __global int *faces, const __global int *face_ids,
                         const int nfaces, const float t0, const float dt, const int rows,
                         const __global float *planes, const __global int *first_row, const __global int *row_count,
@@ -254,7 +255,9 @@ __kernel void fill_rows(const __global float *vertices, const __global int *face
         const int k = wrap_row(k0 + j, rows);
         float lo, hi;
         face_span(x0, y0, z0, x1, y1, z1, x2, y2, z2, t0 + ((float)k + 0.5f) * dt, &lo, &hi);
-        __global float *r = records + (size_t)REC * (offsets[k] + atomic_inc(&cursor[k]));
+        const int slot = offsets[k] + atomic_inc(&cursor[k]);
+        if (slot >= offsets[k + 1]) continue;
+        __global float *r = records + (size_t)REC * slot;
         r[0] = lo;
         r[1] = hi;
         r[2] = planes[4 * i];
@@ -360,7 +363,7 @@ __kernel void edge_rows(const __global float *vertices, const __global int *tail
 }
 
 /* fill_edges: one work-item per ridge edge; its crossing record in every row it crosses, at the row's
- * offset plus a slot from the row's cursor. */
+ * offset plus a slot from the row's cursor; past the row's end nothing is written (as fill_rows). */
 __kernel void fill_edges(const __global float *vertices, const __global int *tails, const __global int *heads,
                          const __global int *group, const int nedges, const int nridge, const float t0, const float dt,
                          const int rows,
@@ -392,7 +395,9 @@ __kernel void fill_edges(const __global float *vertices, const __global int *tai
 #else
         const float s = cx;
 #endif
-        __global float *c = crossings + (size_t)REC * (offsets[k] + atomic_inc(&cursor[k]));
+        const int slot = offsets[k] + atomic_inc(&cursor[k]);
+        if (slot >= offsets[k + 1]) continue;
+        __global float *c = crossings + (size_t)REC * slot;
         c[0] = s; c[1] = cx; c[2] = cy; c[3] = cz; c[4] = up;
         c[5] = as_float(group[i]);
         c[6] = as_float(i);
@@ -426,7 +431,7 @@ __kernel void fill_poles(const __global float *poles, const __global int *pole_r
 {
     const int k = get_global_id(0);
     if (k >= rows) return;
-    for (int j = 0; j < npoles; ++j) {
+    for (int j = 0; j < npoles && offsets[k] + j < offsets[k + 1]; ++j) {   /* the host counts npoles a row */
         __global float *c = crossings + (size_t)REC * (offsets[k] + j);
         const float x = poles[j];
         c[0] = x > 0.0f ? 1.0f : -1.0f;

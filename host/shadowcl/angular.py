@@ -119,7 +119,9 @@ from .geometry import Mesh
 from .lights import PointLight
 from .methods import Method, check_prepare
 from .points import check_points
+from .lightspace import box_corners, orthonormal_basis
 from .silhouette import edge_adjacency, silhouette_edges, silhouette_loops
+from .topology import components, concave_edges
 
 REC_FLOATS = 8                 # kernels/angular.cl: REC
 MIN_ROWS, MAX_ROWS = 16, 1 << 16
@@ -236,23 +238,16 @@ def angular_frame(light, occluder_points: np.ndarray, prefer_x=None) -> tuple[np
         if np.linalg.norm(px) > 1e-9 and (not point or _pole_clearance(px / np.linalg.norm(px), d) >= POLE_CLEARANCE):
             x_axis = px / np.linalg.norm(px)
     if x_axis is None:
-        basis = _orthonormal_basis(z_axis)
+        basis = np.stack(orthonormal_basis(z_axis))
         x_axis = basis[0]
         if point and len(d):
             proj = d @ basis[:2].T                                   # components in the plane orthogonal to z
             x_axis = np.linalg.eigh(proj.T @ proj)[1][:, 0] @ basis[:2]   # least spread: farthest from them
     if point:                                                        # -Z: the mean direction, orthogonal to X
         z_axis = z_axis - (z_axis @ x_axis) * x_axis
-        z_axis = z_axis / np.linalg.norm(z_axis) if np.linalg.norm(z_axis) > 1e-9 else _orthonormal_basis(x_axis)[0]
+        z_axis = z_axis / np.linalg.norm(z_axis) if np.linalg.norm(z_axis) > 1e-9 else orthonormal_basis(x_axis)[0]
     y_axis = np.cross(z_axis, x_axis)
     return origin, np.stack([x_axis, y_axis, z_axis])
-
-
-def _orthonormal_basis(z: np.ndarray) -> np.ndarray:
-    helper = np.array([1.0, 0, 0]) if abs(z[0]) < 0.9 else np.array([0, 1.0, 0])
-    x = np.cross(helper, z)
-    x /= np.linalg.norm(x)
-    return np.stack([x, np.cross(z, x), z])
 
 
 def row_coordinate(local: np.ndarray, point: bool) -> np.ndarray:
@@ -353,7 +348,7 @@ def build_table(device, local_vertices: np.ndarray, faces: np.ndarray, table_fac
         if n:
             dev.kernel("angular.cl", "fill_rows", options)(queue, (n,), None, vertices_g, faces_g, ids_g, *scalars,
                                                            planes_g, first_g, nrows_g, offsets_g, cursor_g, records_g)
-        queue.finish()
+        check_rows_filled(dev, cursor_g, offsets, "fill_rows")
         t2 = time.perf_counter()
         dev.kernel("angular.cl", "sort_rows", options)(queue, (rows,), None, offsets_g, np.int32(rows), records_g)
     queue.finish()
@@ -408,6 +403,7 @@ def loop_pairs(device, vertices_g, loops, frame: Frame, stats: dict):
             dev.kernel("angular.cl", "fill_edges", options)(
                 queue, (ne,), None, vertices_g, tails_g, heads_g, dev.to_device(group), np.int32(ne), np.int32(nridge),
                 *scalars[1:], first_g, count_g, offsets_g, cursor_g, cross_g)
+        check_rows_filled(dev, cursor_g, offsets, "fill_edges")
     queue.finish()
     t_pair = time.perf_counter()
     while True:
@@ -432,15 +428,9 @@ def loop_pairs(device, vertices_g, loops, frame: Frame, stats: dict):
 def lit_regions(adjacency, facing: np.ndarray) -> np.ndarray:
     """(F,) int: connected regions of light-facing faces (joined across edges with both faces facing the
     light), -1 for the others. The loops bounding one region (an outer loop and its holes) pair together."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
     pairs = adjacency.edge_faces[adjacency.face_count == 2]
     both = facing[pairs[:, 0]] & facing[pairs[:, 1]]
-    nfaces = len(facing)
-    graph = coo_matrix((np.ones(int(both.sum())), (pairs[both, 0], pairs[both, 1])), shape=(nfaces, nfaces))
-    label = connected_components(graph, directed=False)[1]
-    return np.where(facing, label, -1)
+    return np.where(facing, components(len(facing), pairs[both]), -1)
 
 
 def edge_regions(adjacency, facing: np.ndarray, edges: np.ndarray, regions: np.ndarray) -> np.ndarray:
@@ -451,23 +441,12 @@ def edge_regions(adjacency, facing: np.ndarray, edges: np.ndarray, regions: np.n
 
 
 def concave_creases(adjacency, facing: np.ndarray) -> np.ndarray:
-    """Edges between two light-facing faces where the surface folds inwards (the far corner of one face
-    lies on the outer side of the other's plane): a valley seen from the light, which a chord between the
-    loop's crossings would cut off. Section 5 inserts such edges in duplicate for depth; the convex ones
-    lie in front of the chord and need none."""
-    two = adjacency.face_count == 2
-    ids = np.flatnonzero(two)
+    """Concave edges (:func:`shadowcl.topology.concave_edges`) between two light-facing faces: a valley
+    seen from the light, which a chord between the loop's crossings would cut off. Section 5 inserts such
+    edges in duplicate for depth; the convex ones lie in front of the chord and need none."""
+    ids = np.flatnonzero(adjacency.face_count == 2)
     f = adjacency.edge_faces[ids]
-    ids, f = ids[facing[f[:, 0]] & facing[f[:, 1]]], f[facing[f[:, 0]] & facing[f[:, 1]]]
-    v = np.asarray(adjacency.vertices, dtype=np.float64)
-    tri = v[adjacency.faces[f[:, 0]]]
-    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    other = adjacency.faces[f[:, 1]]
-    ends = adjacency.edges[ids]
-    far = other.sum(axis=1) - ends.sum(axis=1)                     # the corner of face 2 off the edge
-    out = v[far] - v[ends[:, 0]]
-    rise = np.einsum("ij,ij->i", normal, out)
-    return ids[rise > 1e-6 * np.linalg.norm(normal, axis=1) * np.linalg.norm(out, axis=1)]
+    return concave_edges(adjacency, ids[facing[f[:, 0]] & facing[f[:, 1]]])
 
 
 def pole_hits(adjacency, facing: np.ndarray, regions: np.ndarray, local) -> tuple[np.ndarray, np.ndarray]:
@@ -495,6 +474,19 @@ def check_capacity(device, entries: int, rows: int, what: str) -> None:
     if entries >= 2**31 or nbytes > device.max_alloc_bytes:
         raise ValueError(f"theta_resolution: {rows} rows give {entries} {what} ({nbytes >> 20} MiB), more than "
                          f"the device holds in one buffer ({device.max_alloc_bytes >> 20} MiB); use fewer rows")
+
+
+def check_rows_filled(device, cursor_g, offsets: np.ndarray, kernel: str) -> None:
+    """Raise ``RuntimeError`` when a fill kernel's row cursors (``cursor_g``, (rows,) slots taken) went past
+    their rows' slots (``offsets``, (rows + 1,)): the kernel dropped those writes, so the table would be
+    silently short. The counts come from the same per-item row ranges, so this is a bug, not a size to grow."""
+    rows = len(offsets) - 1
+    taken = device.from_device(cursor_g, rows, np.int32).astype(np.int64)
+    over = np.flatnonzero(taken > np.diff(offsets))
+    if len(over):
+        k = int(over[0])
+        raise RuntimeError(f"angular {kernel}: {len(over)} rows got more records than counted, first row {k} "
+                           f"({taken[k]} for {int(offsets[k + 1] - offsets[k])} slots); writes past them were dropped")
 
 
 def row_counts(first: np.ndarray, count: np.ndarray, rows: int) -> np.ndarray:
@@ -527,27 +519,6 @@ def table_entries(device, table: Table) -> dict:
     plane[:, 3] += plane[:, :3] @ table.frame.anchor          # the kernels' offsets are relative to the anchor
     return dict(offsets=offsets, row=np.repeat(np.arange(rows), np.diff(offsets)), face=ident,
                 region=np.where(ident < 0, -ident - 1, -1), s_lo=rec[:, 0], s_hi=rec[:, 1], plane=plane)
-
-
-def closed_faces(adjacency) -> tuple[np.ndarray, np.ndarray]:
-    """((F,) bool, (F,) int): faces of connected components (faces joined by shared edges) that are closed
-    manifolds, consistently wound, and each face's component label. In a closed component a blocked ray
-    always crosses a light-facing face, so only those enter the table; the other components' faces all
-    enter (a hidden face of an open mesh can stop a ray)."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    nfaces = len(adjacency.faces)
-    owner = np.repeat(np.arange(len(adjacency.edges)), adjacency.face_count)   # edge of each CSR face item
-    first = adjacency.face_items[adjacency.face_offsets[:-1]][owner]           # join every face to its edge's first
-    graph = coo_matrix((np.ones(len(owner)), (first, adjacency.face_items)), shape=(nfaces, nfaces))
-    _, label = connected_components(graph, directed=False)
-    bad = np.ones(len(adjacency.edges), dtype=bool)
-    bad[adjacency.face_count == 2] = False
-    bad[adjacency.misoriented_edges] = True
-    open_label = np.zeros(label.max(initial=-1) + 1, dtype=bool)
-    open_label[label[adjacency.face_items[np.isin(owner, np.flatnonzero(bad))]]] = True
-    return ~open_label[label], label
 
 
 # Method ----------------------------------------------------------------------------------------------------
@@ -612,9 +583,9 @@ class AngularMethod(Method):
         point = isinstance(light, PointLight)
         adjacency = edge_adjacency(mesh)
         sil = silhouette_edges(self.device, adjacency, light)
-        closed, label = closed_faces(adjacency)
-        if point:
-            light_inside(mesh, light, closed, label)
+        closed = adjacency.closed_faces     # in a closed component a blocked ray always crosses a light-facing
+        if point:                           # face, so only those enter the table; elsewhere every face does
+            light_inside(adjacency, light)
         keep = np.where(closed, sil.facing, True)
         keep[adjacency.collapsed_faces] = False
         table_faces = np.flatnonzero(keep)
@@ -644,7 +615,7 @@ class AngularMethod(Method):
         elif self.theta_resolution is not None:
             rows = self.theta_resolution
         else:
-            far_pts = _box_corners(box)
+            far_pts = box_corners(box)
             far = float(np.linalg.norm(far_pts - light.position, axis=1).max()) if point else 0.0
             rows = rows_from_receivers(span, far, box, self.expected_receivers, point)
         if not full:                                   # pad half a row each side: extreme corners get a centre
@@ -808,39 +779,19 @@ class AngularMethod(Method):
         return table_entries(self.device, self.table)
 
 
-def light_inside(mesh: Mesh, light, closed: np.ndarray, label: np.ndarray) -> None:
-    """Raise ``ValueError`` when point ``light`` is inside a closed component (winding number of the
-    component round the light, by the solid angles of its faces, at least 1/2 in size). There no face
-    turns to the light (or all do, wound inwards), the table would be empty or the far wall's, and every
-    receiver would come out lit; the shadow is everything outside the solid, not what this method models.
-    Only components whose bounding box holds the light are summed (1.1 s for 1.2 M faces otherwise)."""
-    if not isinstance(light, PointLight) or not closed.any():
+def light_inside(adjacency, light) -> None:
+    """Raise ``ValueError`` when point ``light`` is inside a closed component of the mesh of ``adjacency``
+    (:meth:`shadowcl.topology.EdgeAdjacency.enclosing_faces`). There no face turns to the light (or all do,
+    wound inwards), the table would be empty or the far wall's, and every receiver would come out lit; the
+    shadow is everything outside the solid, not what this method models."""
+    if not isinstance(light, PointLight):
         return
-    ids = np.flatnonzero(closed)
-    vertex_label = np.full(len(mesh.vertices), -1, dtype=np.int64)
-    vertex_label[mesh.faces[ids]] = label[ids, None]
-    used = vertex_label >= 0
-    vl, side = vertex_label[used], mesh.vertices[used] < light.position
-    # the box holds the light when the component has vertices on both sides of it along every axis
-    n = int(label.max()) + 1
-    holds = np.ones(n, dtype=bool)
-    for axis in range(3):
-        below = np.bincount(vl, weights=side[:, axis], minlength=n)
-        holds &= (below > 0) & (below < np.bincount(vl, minlength=n))
-    for c in np.flatnonzero(holds):
-        part = ids[label[ids] == c]
-        v = mesh.vertices[mesh.faces[part]].astype(np.float64) - light.position
-        a, b, d = v[:, 0], v[:, 1], v[:, 2]
-        la, lb, ld = (np.linalg.norm(x, axis=1) for x in (a, b, d))
-        det = np.einsum("ij,ij->i", a, np.cross(b, d))
-        den = la * lb * ld + np.einsum("ij,ij->i", a, b) * ld + np.einsum("ij,ij->i", a, d) * lb \
-            + np.einsum("ij,ij->i", b, d) * la
-        winding = 2 * np.arctan2(det, den).sum() / (4 * np.pi)      # signed solid angles (Van Oosterom & Strackee)
-        if abs(winding) > 0.5:
-            raise ValueError(f"light: the point light is inside a closed solid "   # (its position here is the frame's)
-                             f"({len(part)} faces); everything outside that solid is in its shadow, which "
-                             "the angular table cannot represent (no face of it turns to the light): move the "
-                             "light out or open the mesh")
+    enclosing = adjacency.enclosing_faces(light.position)
+    if len(enclosing):
+        raise ValueError(f"light: the point light is inside a closed solid "   # (its position here is the frame's)
+                         f"({len(enclosing)} faces); everything outside that solid is in its shadow, which "
+                         "the angular table cannot represent (no face of it turns to the light): move the "
+                         "light out or open the mesh")
 
 
 def _same_axis(a, b) -> bool:
@@ -859,8 +810,3 @@ def _unit_directions(light, points: np.ndarray) -> np.ndarray:
     d = np.asarray(points, dtype=np.float64) - light.position
     length = np.linalg.norm(d, axis=1)
     return d[length > 0] / length[length > 0, None]
-
-
-def _box_corners(box: np.ndarray) -> np.ndarray:
-    return np.array([[box[i][0], box[j][1], box[k][2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
-
