@@ -16,6 +16,13 @@ from shadowcl.methods import default_eps
 from shadowcl.render import render_report
 
 
+@pytest.fixture(autouse=True)
+def fresh_costs(monkeypatch):
+    """Each test starts from the priors: what earlier calls measured on the device is not carried over."""
+    monkeypatch.setattr(auto, "_COSTS", {})
+    monkeypatch.setattr(auto, "_SCALING", {})
+
+
 @lru_cache(maxsize=4)
 def shape_on_ground(kind: str, receivers: int, seed: int = 3):
     """(mesh, light, points, normals): ``kind`` standing on a ground quad three times its footprint;

@@ -57,6 +57,10 @@ CHOICE_MARGIN = 0.7         # a candidate is chosen only when predicted below th
 # ({(device id, method): factor}); 1 until measured. Measured at 1.2 M vs 20 k receivers: exact 0.75
 # (its cell binning amortises), shadow maps with the plane bias 1.3-2 (their sample was 2x optimistic).
 _SCALING: dict = {}
+# A candidate's measured (prepare / exact's prepare, time on all / exact's) on a device, by (device id,
+# method, settings): it replaces the priors of CANDIDATES for the next calls. The priors alone let a
+# shadow-volume trial on the 69 k-triangle bunny cost 1-2x exact's whole call (auto/exact 2.3-3.1).
+_COSTS: dict = {}
 
 # (method, parameters, prior prepare cost / exact's, prior per-receiver cost / exact's). The priors only
 # order the trials and gate them before they are measured; they are medians measured on this project's
@@ -204,17 +208,21 @@ class AutoMethod(Method):
                 allowance = min(allowance, self.max_time)
             calibration["exact_predicted_s"] = exact_prepare + exact_remaining
             spent = 0.0
-            order = sorted(CANDIDATES, key=lambda c: c[2] * exact_prepare + total * c[3] * exact_rate)
+            candidates = [(name, settings, *_COSTS.get(self._cost_key(name, settings), priors))
+                          for name, settings, *priors in CANDIDATES]
+            order = sorted(candidates, key=lambda c: c[2] * exact_prepare + total * c[3] * exact_rate)
             for name, settings, prior_prepare, prior_rate in order:
                 trial = prior_prepare * exact_prepare + len(sample) * prior_rate * exact_rate
                 if spent + trial > allowance or trial + total * prior_rate * exact_rate >= exact_remaining:
                     tried.append({"method": name, **settings, "skipped": "predicted too slow to beat exact"})
                     continue
                 record, instance = self._trial(name, settings, occluders, light, box, eps, sample, truth, total)
-                spent += record.get("prepare_s", 0.0) + record.get("sample_s", 0.0)
+                spent += record["trial_s"]
                 tried.append(record)
                 if "error" not in record:
                     continue
+                _COSTS[self._cost_key(name, settings)] = (record["prepare_s"] / max(exact_prepare, 1e-9),
+                                                         record["predicted_s"] / max(exact_remaining, 1e-12))
                 record["upper_bound"] = upper_bound(record["wrong"], len(sample))
                 record["passes"] = record["upper_bound"] <= self.max_error
                 if record["passes"] and record["predicted_s"] < CHOICE_MARGIN * exact_remaining:
@@ -234,7 +242,7 @@ class AutoMethod(Method):
         record = {"method": name, **settings}
         cls = method_class(name)
         instance = cls(self.device, **with_receiver_count(name, settings, total))
-        clock = time.perf_counter()
+        start = time.perf_counter()
         try:
             # the light as the public calls would judge it for this method (Shadows did it for exact's)
             check_clearance(occluders, light, cls.min_light_clearance, name)
@@ -243,14 +251,18 @@ class AutoMethod(Method):
             instance.prepare(occluders, light, box, eps)
             self.device.queue.finish()
         except ValueError as error:          # the method cannot answer this query (e.g. refuses the light)
-            record["refused"] = str(error)
+            record.update(refused=str(error), trial_s=time.perf_counter() - start)
             return record, None
-        record["prepare_s"] = time.perf_counter() - clock
+        record["prepare_s"] = time.perf_counter() - start
         answer, record["sample_s"] = _timed_classify(instance, sample)
         wrong = int(np.count_nonzero(answer != truth))
         record.update(wrong=wrong, error=wrong / len(sample),
-                      predicted_s=total * record["sample_s"] / len(sample) * self._scaling(name))
+                      predicted_s=total * record["sample_s"] / len(sample) * self._scaling(name),
+                      trial_s=time.perf_counter() - start)
         return record, instance
+
+    def _cost_key(self, name: str, settings: dict) -> tuple:
+        return id(self.device), name, tuple(sorted(settings.items()))
 
     def _scaling(self, method: str) -> float:
         return _SCALING.get((id(self.device), method), 1.0)
