@@ -163,15 +163,18 @@ def main(argv=None) -> int:
     parser.add_argument("--quick", action="store_true")
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--out", type=Path, default=RESULTS)
+    parser.add_argument("--scenes", nargs="*", help="only these scenes (written as auto-SCENES.json)")
     args = parser.parse_args(argv)
     device = sc.get_device()
     started = time.perf_counter()
     rows = []
     for name, mesh, light, points, normals in cases(args.quick):
+        if args.scenes and name not in args.scenes:
+            continue
         for with_normals in (False, True):
             rows += measure(name, mesh, light, points, normals if with_normals else None,
                             3 if args.quick else args.repeats, device)
-    stem = "auto-quick" if args.quick else "auto"
+    stem = "auto-quick" if args.quick else "-".join(["auto", *(args.scenes or [])])
     args.out.mkdir(parents=True, exist_ok=True)
     doc = {"settings": {"quick": args.quick, "repeats": args.repeats, "budgets": BUDGETS,
                         "seconds": time.perf_counter() - started, "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())},
