@@ -10,6 +10,7 @@ every polygon needs at least three corners, each a valid vertex index.
 from __future__ import annotations
 
 import os
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -120,6 +121,99 @@ def _checked(vertices: np.ndarray, corners: np.ndarray, sizes: np.ndarray, verte
 
 
 def _read_obj(data: bytes) -> Polygons:
+    bulk = _read_obj_bulk(data)
+    return bulk if bulk is not None else _read_obj_by_line(data)
+
+
+def _byte_set(chars: bytes) -> np.ndarray:
+    table = np.zeros(256, dtype=bool)
+    table[list(chars)] = True
+    return table
+
+
+SPACE = _byte_set(b" \t\r\n")
+# the other bytes str.split() takes for whitespace in Latin-1: a file holding one goes to the line parser
+UNUSUAL_SPACE = _byte_set(b"\x0b\x0c\x1c\x1d\x1e\x1f\x85\xa0")
+FLOAT_BYTES = _byte_set(b"0123456789.+-eE \t\r\n")   # no letters: NumPy and float() differ on 'nan', hex
+INDEX_BYTES = _byte_set(b"0123456789+- \t\r\n")
+
+
+def _bulk_numbers(text: np.ndarray, dtype) -> np.ndarray | None:
+    """The whitespace-separated numbers of ``text`` (uint8), or None where NumPy stops early."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DeprecationWarning)   # NumPy's word for "stopped at a bad token"
+        try:
+            return np.fromstring(text.tobytes(), dtype=dtype, sep=" ")
+        except (ValueError, DeprecationWarning):
+            return None
+
+
+def _tokens(text: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Start of every whitespace-separated token of ``text`` (uint8, lines ending in newline) as a
+    boolean per byte, and the line (counted within ``text``) of each token."""
+    space = SPACE[text]
+    start = ~space & np.concatenate([[True], space[:-1]])
+    return start, np.searchsorted(np.flatnonzero(text == 10), np.flatnonzero(start))
+
+
+def _read_obj_bulk(data: bytes) -> Polygons | None:
+    """The polygons of an OBJ file whose 'v' and 'f' records are plain numbers, parsed in bulk; None
+    when a record needs the line parser (which then reads the unusual form or names the problem), so
+    both give the same result on every file."""
+    text = np.frombuffer(data + b"\n", dtype=np.uint8)
+    if UNUSUAL_SPACE[text].any():
+        return None
+    ends = np.flatnonzero(text == 10)
+    starts = np.concatenate([[0], ends[:-1] + 1])
+    first, second = text[starts], text[np.minimum(starts + 1, len(text) - 1)]
+    keyed = (ends - starts >= 2) & SPACE[second]
+    is_vertex, is_face = keyed & (first == ord("v")), keyed & (first == ord("f"))
+    if np.any((ends - starts == 1) & np.isin(first, (ord("v"), ord("f")))):
+        return None   # a bare keyword
+    blank_start = np.flatnonzero(SPACE[first] & (ends > starts))
+    if any(data[starts[line]:ends[line]].strip() for line in blank_start):
+        return None   # a record after whitespace
+    kind = np.zeros(len(starts), dtype=np.int8)
+    kind[is_vertex], kind[is_face] = 1, 2
+    line_kind = np.repeat(kind, ends - starts + 1)
+    work = text.copy()
+    work[starts[keyed]] = ord(" ")   # the keyword
+
+    vertex_text = work[line_kind == 1]
+    if not FLOAT_BYTES[vertex_text].all():
+        return None
+    _, token_line = _tokens(vertex_text)
+    counts = np.bincount(token_line, minlength=np.count_nonzero(is_vertex))
+    values = _bulk_numbers(vertex_text, np.float64)
+    if values is None or len(values) != len(token_line) or (len(counts) and counts.min() < 3):
+        return None
+    first_three = (np.cumsum(counts) - counts)[:, None] + np.arange(3)   # extra numbers (w, colour) dropped
+    vertices = values[first_three]
+
+    face_text = work[line_kind == 2]
+    start, token_line = _tokens(face_text)
+    slash = face_text == ord("/")
+    if slash.any():   # "v/vt/vn": keep v, blank the rest of the token
+        slashes = np.cumsum(slash, dtype=np.int32)
+        slashes_before = np.concatenate([[0], (slashes - slash)[start]])   # per token; 0 before the first
+        after_slash = slashes - slashes_before[np.cumsum(start, dtype=np.int32)] > 0
+        face_text[after_slash & ~SPACE[face_text]] = ord(" ")
+    if not INDEX_BYTES[face_text].all():
+        return None
+    indices = _bulk_numbers(face_text, np.int64)
+    limits = np.iinfo(np.int64)
+    if indices is None or len(indices) != len(token_line) or np.isin(indices, (limits.min, limits.max)).any():
+        return None   # a missing vertex index, or one NumPy clipped to 64 bits
+    sizes = np.bincount(token_line, minlength=np.count_nonzero(is_face))
+    vertices_before = np.repeat(np.cumsum(is_vertex)[is_face], sizes)
+    if np.any((indices == 0) | (-indices > vertices_before)):
+        return None
+    corners = np.where(indices > 0, indices - 1, vertices_before + indices)
+    return _checked(vertices, corners, sizes, np.flatnonzero(is_vertex) + 1, np.flatnonzero(is_face) + 1,
+                    index_base=1)
+
+
+def _read_obj_by_line(data: bytes) -> Polygons:
     vertices, vertex_lines, corners, sizes, polygon_lines = [], [], [], [], []
     for number, line in enumerate(_lines(data), 1):
         parts = line.split()
