@@ -349,3 +349,55 @@ def test_nesting_is_bounded_with_the_key_path(tmp_path, depth, inline):
     message = str(error.value)
     assert message.startswith(f"{path}: ")
     assert ("objects[0]" in message and "CSG nested more than 64 deep" in message) or "too deep for the TOML parser" in message
+
+
+# ---- the bulk OBJ path against the line parser: the same polygons or the same error on every file ----
+
+OBJ_HOSTILE = ["0", "1e", "1.2.3", "nan", "inf", "-", "+", "/2", "99999999999999999999", "9223372036854775807",
+               "1_0", "0x1p3", "1\r", "\xa0", "é", "1e39", "12345678901234567890123", "-9"]
+
+
+def obj_records(hostile: bool):
+    """Records of plain tokens (which the bulk path reads), or of plain tokens now and then a hostile one."""
+    def records(keywords, good):
+        tokens = st.sampled_from(good * 10 + OBJ_HOSTILE if hostile else good)
+        return st.tuples(st.sampled_from(keywords), st.lists(tokens, min_size=3, max_size=5),
+                         st.sampled_from([" ", "\t", "  "]))
+
+    others = ["vt", "vn", "#", "o", ""] + ([" v", "\tf", "v\r", "f\r"] if hostile else [])
+    return st.lists(st.one_of(records(["v"], ["1", "-1", "2", "+2", "3", "1.5", "-.5e3"]),
+                              records(["f"], ["1", "2", "3", "-1", "-2", "-3", "+2", "1/2/3", "1//2", "-2/1", "2/x"]),
+                              records(others, ["1", "a"])), max_size=12)
+
+
+@settings(max_examples=300, deadline=5000, derandomize=True, database=None)
+@given(records=st.one_of(obj_records(False), obj_records(True)), newline=st.sampled_from(["\n", "\r\n"]))
+def test_bulk_obj_agrees_with_the_line_parser(records, newline):
+    """Files of valid and hostile OBJ records: the bulk reader (which hands what it declines to the line
+    parser) gives the line parser's polygons or its exact error message."""
+    from shadowcl import meshio
+
+    data = newline.join(keyword + separator + separator.join(tokens)
+                        for keyword, tokens, separator in records).encode("latin-1")
+
+    def outcome(read):
+        try:
+            polygons = read(data)
+        except ValueError as error:
+            return str(error)
+        return polygons.vertices.tolist(), polygons.corners.tolist(), polygons.sizes.tolist()
+
+    assert outcome(meshio._read_obj) == outcome(meshio._read_obj_by_line)
+
+
+def test_bulk_obj_reads_the_common_forms():
+    """The bulk path itself (not the line parser) reads slashes, negative indices, extra vertex values,
+    tabs, CRLF, comments and blank lines, so the agreement test above compares two parsers."""
+    from shadowcl import meshio
+
+    data = (b"# comment \xe9\r\nmtllib a.mtl\r\nv 0 0 0 1\r\nv\t1 0 0 0.5 0.5 0.5\r\nv 0 1 0\r\n\r\n   \r\n"
+            b"vt 0 0\r\nvn 0 0 1\r\nf 1/1/1 2//1 3\r\nv 1 1 0\r\nf -1 -2 -3 1/1\r\ns off\r\n")
+    polygons = meshio._read_obj_bulk(data)
+    assert polygons is not None
+    assert polygons.vertices.tolist() == [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]]
+    assert polygons.corners.tolist() == [0, 1, 2, 3, 2, 1, 0] and polygons.sizes.tolist() == [3, 4]
