@@ -401,3 +401,46 @@ def test_bulk_obj_reads_the_common_forms():
     assert polygons is not None
     assert polygons.vertices.tolist() == [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]]
     assert polygons.corners.tolist() == [0, 1, 2, 3, 2, 1, 0] and polygons.sizes.tolist() == [3, 4]
+
+
+OFF_GOOD_VERTEX = ["0", "1", "-1.5", "2e-1", "+3"]
+
+
+@settings(max_examples=300, deadline=5000, derandomize=True, database=None)
+@given(counts=st.tuples(st.integers(0, 4), st.integers(0, 4)), data=st.data(),
+       extra=st.sampled_from(["", "0", "x"]), hostile=st.booleans(), newline=st.sampled_from(["\n", "\r\n"]))
+def test_bulk_off_agrees_with_the_line_parser(counts, data, extra, hostile, newline):
+    """OFF files of plain and hostile rows (counts off by one, sizes past the row, floats as indices,
+    colours after a face, blank lines, comments): the bulk reader gives the line parser's outcome."""
+    from shadowcl import meshio
+
+    nv, nf = counts
+    bad = OFF_HOSTILE if hostile else []
+    rows = [" ".join(data.draw(st.lists(st.sampled_from(OFF_GOOD_VERTEX * 10 + bad), min_size=3 - hostile, max_size=5)))
+            for _ in range(nv + data.draw(st.sampled_from([-1, 0, 0, 0, 1])) * hostile)]
+    for _ in range(nf):
+        size = data.draw(st.sampled_from([3, 3, 4] + ([0, 5, "+3", "3.0"] if hostile else [])))
+        length = data.draw(st.integers(3, 4)) if hostile else size   # hostile: maybe not the row's size
+        good = [str(i) for i in range(nv)] if nv and not hostile else ["0", "1", "2", "3"]
+        corners = data.draw(st.lists(st.sampled_from(good * 10 + bad), min_size=length, max_size=length))
+        rows.append(" ".join([str(size)] + corners + data.draw(st.sampled_from([[], ["0.5", "1", "0"]]))))
+    if hostile and rows:
+        rows.insert(data.draw(st.integers(0, len(rows))), data.draw(st.sampled_from(["", "  ", "", "# note"])))
+    text = newline.join(["OFF", f"{nv} {nf} {extra}".strip()] + rows) + newline
+
+    def outcome(read):
+        try:
+            polygons = read(text.encode("latin-1"))
+        except ValueError as error:
+            return str(error)
+        return polygons.vertices.tolist(), polygons.corners.tolist(), polygons.sizes.tolist()
+
+    assert outcome(meshio._read_off) == outcome(meshio._read_off_by_line)
+    if not hostile:   # the bulk path itself reads plain files
+        try:
+            assert meshio._read_off_bulk(text.encode("latin-1")) is not None
+        except ValueError:
+            pass   # the bulk path itself found the problem (an index past the vertices)
+
+
+OFF_HOSTILE = ["1e", "nan", "-", "1.0", "-1", "99999999999999999999", "a", "1_0", "\xa0"]

@@ -136,16 +136,22 @@ SPACE = _byte_set(b" \t\r\n")
 UNUSUAL_SPACE = _byte_set(b"\x0b\x0c\x1c\x1d\x1e\x1f\x85\xa0")
 FLOAT_BYTES = _byte_set(b"0123456789.+-eE \t\r\n")   # no letters: NumPy and float() differ on 'nan', hex
 INDEX_BYTES = _byte_set(b"0123456789+- \t\r\n")
+DIGITS = _byte_set(b"0123456789")
+FLOAT_MARKS = _byte_set(b".eE")   # what a float has and an int() does not
 
 
-def _bulk_numbers(text: np.ndarray, dtype) -> np.ndarray | None:
-    """The whitespace-separated numbers of ``text`` (uint8), or None where NumPy stops early."""
+def _bulk_numbers(text: np.ndarray, dtype, count: int) -> np.ndarray | None:
+    """The ``count`` whitespace-separated numbers of ``text`` (uint8), or None unless NumPy reads exactly
+    ``count`` numbers to the end."""
+    if count == 0:
+        return np.zeros(0, dtype=dtype)   # NumPy reads a blank text as [-1]
     with warnings.catch_warnings():
         warnings.simplefilter("error", DeprecationWarning)   # NumPy's word for "stopped at a bad token"
         try:
-            return np.fromstring(text.tobytes(), dtype=dtype, sep=" ")
+            values = np.fromstring(text.tobytes(), dtype=dtype, sep=" ")
         except (ValueError, DeprecationWarning):
             return None
+    return values if len(values) == count else None
 
 
 def _tokens(text: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -184,8 +190,8 @@ def _read_obj_bulk(data: bytes) -> Polygons | None:
         return None
     _, token_line = _tokens(vertex_text)
     counts = np.bincount(token_line, minlength=np.count_nonzero(is_vertex))
-    values = _bulk_numbers(vertex_text, np.float64)
-    if values is None or len(values) != len(token_line) or (len(counts) and counts.min() < 3):
+    values = _bulk_numbers(vertex_text, np.float64, len(token_line))
+    if values is None or (len(counts) and counts.min() < 3):
         return None
     first_three = (np.cumsum(counts) - counts)[:, None] + np.arange(3)   # extra numbers (w, colour) dropped
     vertices = values[first_three]
@@ -200,9 +206,9 @@ def _read_obj_bulk(data: bytes) -> Polygons | None:
         face_text[after_slash & ~SPACE[face_text]] = ord(" ")
     if not INDEX_BYTES[face_text].all():
         return None
-    indices = _bulk_numbers(face_text, np.int64)
+    indices = _bulk_numbers(face_text, np.int64, len(token_line))
     limits = np.iinfo(np.int64)
-    if indices is None or len(indices) != len(token_line) or np.isin(indices, (limits.min, limits.max)).any():
+    if indices is None or np.isin(indices, (limits.min, limits.max)).any():
         return None   # a missing vertex index, or one NumPy clipped to 64 bits
     sizes = np.bincount(token_line, minlength=np.count_nonzero(is_face))
     vertices_before = np.repeat(np.cumsum(is_vertex)[is_face], sizes)
@@ -243,6 +249,57 @@ def _read_obj_by_line(data: bytes) -> Polygons:
 
 
 def _read_off(data: bytes) -> Polygons:
+    bulk = _read_off_bulk(data)
+    return bulk if bulk is not None else _read_off_by_line(data)
+
+
+def _read_off_bulk(data: bytes) -> Polygons | None:
+    """The polygons of an OFF file without comments, its header and counts on lines of their own, parsed
+    in bulk; None when the line parser must read it or name its problem (both agree on every file)."""
+    if b"#" in data:
+        return None
+    text = np.frombuffer(data + b"\n", dtype=np.uint8)
+    if UNUSUAL_SPACE[text].any():
+        return None
+    start, token_line = _tokens(text)
+    new_line = np.concatenate([[True], token_line[1:] != token_line[:-1]])
+    lines, first = token_line[new_line], np.flatnonzero(new_line)   # the non-blank lines, their first token
+    if len(lines) < 2 or first[1] != 1:     # the header alone on its line, then the counts
+        return None
+    ends = np.flatnonzero(text == 10)
+    keyword, *counts = data[:ends[lines[1]]].decode("latin-1").split()
+    if not (keyword.isalpha() and keyword.endswith("OFF")) or len(counts) < 2 or not all(c.isdigit() for c in counts[:2]):
+        return None
+    nv, nf = int(counts[0]), int(counts[1])
+    if nv + nf != len(lines) - 2:
+        return None
+    body = text[ends[lines[1]] + 1:]
+    if not FLOAT_BYTES[body].all():
+        return None
+    start, first = start[ends[lines[1]] + 1:], first[2:] - (1 + len(counts))   # body tokens from 0
+    values = _bulk_numbers(body, np.float64, np.count_nonzero(start))
+    if values is None:
+        return None
+    sizes_per_line = np.diff(np.append(first, len(values)))          # tokens on each line
+    vertex_first, face_first = first[:nv], first[nv:]
+    if nv and sizes_per_line[:nv].min() < 3:
+        return None
+    vertices = values[vertex_first[:, None] + np.arange(3)]
+    token_starts = np.flatnonzero(start)   # a token's bytes run to the next token's start (spaces between)
+    digits_only = ~np.logical_or.reduceat(~(DIGITS[body] | SPACE[body]), token_starts) if len(values) else start[:0]
+    integer = ~np.logical_or.reduceat(FLOAT_MARKS[body], token_starts) if len(values) else start[:0]
+    sizes = values[face_first]
+    if not (digits_only[face_first].all() and np.all(sizes < 2**31)
+            and np.all(sizes_per_line[nv:] >= sizes + 1)):
+        return None
+    sizes = sizes.astype(np.int64)
+    used = np.repeat(face_first + 1, sizes) + (np.arange(sizes.sum()) - np.repeat(np.cumsum(sizes) - sizes, sizes))
+    if not (integer[used].all() and np.all(np.abs(values[used]) < 2**53)):   # exact in float64, as int() reads it
+        return None
+    return _checked(vertices, values[used].astype(np.int64), sizes, lines[2:2 + nv] + 1, lines[2 + nv:] + 1)
+
+
+def _read_off_by_line(data: bytes) -> Polygons:
     records = []  # (line number, tokens) of the non-empty lines, comments removed
     for number, line in enumerate(_lines(data), 1):
         tokens = line.split("#", 1)[0].split()
