@@ -444,3 +444,39 @@ def test_bulk_off_agrees_with_the_line_parser(counts, data, extra, hostile, newl
 
 
 OFF_HOSTILE = ["1e", "nan", "-", "1.0", "-1", "99999999999999999999", "a", "1_0", "\xa0"]
+
+
+STL_HOSTILE_LINES = ["VERTEX 1 2 3", "vertex 1 2", "vertex 1 2 3 4", "vertex 1 nan 2", "vertex 1 1e 2", "vertexx 1 2 3",
+                     "endfacet", "bogus", "vertex 1\xa02 3", "vertex 0x1 2 3"]
+
+
+@settings(max_examples=200, deadline=5000, derandomize=True, database=None)
+@given(facets=st.lists(st.lists(st.tuples(st.sampled_from(["0", "1", "-2.5", "3e-2", "+4"]), st.sampled_from(["", "  ", "\t"])),
+                                min_size=3, max_size=3), max_size=4),
+       hostile=st.lists(st.tuples(st.integers(1, 40), st.sampled_from(STL_HOSTILE_LINES)), max_size=2),
+       newline=st.sampled_from(["\n", "\r\n"]))
+def test_bulk_ascii_stl_agrees_with_the_line_parser(facets, hostile, newline):
+    """ASCII STL files of plain facets (indented or not) with now and then a hostile line: the bulk reader
+    gives the line parser's outcome, and reads the plain ones itself."""
+    from shadowcl import meshio
+
+    lines = ["solid fuzz"]
+    for corners in facets:
+        lines += ["facet normal 0 0 1", " outer loop"]
+        lines += [f"{indent}vertex {x} {x} 1" for x, indent in corners]
+        lines += [" endloop", "endfacet"]
+    lines.append("endsolid fuzz")
+    for at, line in hostile:
+        lines.insert(min(at, len(lines)), line)
+    data = newline.join(lines).encode("latin-1")
+
+    def outcome(read):
+        try:
+            polygons = read(data)
+        except ValueError as error:
+            return str(error)
+        return polygons.vertices.tolist(), polygons.corners.tolist(), polygons.sizes.tolist()
+
+    assert outcome(meshio._read_stl) == outcome(meshio._read_ascii_stl_by_line)
+    if not hostile and facets:
+        assert meshio._read_ascii_stl_bulk(data) is not None

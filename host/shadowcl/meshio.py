@@ -131,13 +131,21 @@ def _byte_set(chars: bytes) -> np.ndarray:
     return table
 
 
-SPACE = _byte_set(b" \t\r\n")
 # the other bytes str.split() takes for whitespace in Latin-1: a file holding one goes to the line parser
-UNUSUAL_SPACE = _byte_set(b"\x0b\x0c\x1c\x1d\x1e\x1f\x85\xa0")
+UNUSUAL_SPACE = b"\x0b\x0c\x1c\x1d\x1e\x1f\x85\xa0"
 FLOAT_BYTES = _byte_set(b"0123456789.+-eE \t\r\n")   # no letters: NumPy and float() differ on 'nan', hex
 INDEX_BYTES = _byte_set(b"0123456789+- \t\r\n")
 DIGITS = _byte_set(b"0123456789")
 FLOAT_MARKS = _byte_set(b".eE")   # what a float has and an int() does not
+
+
+def _is_space(text: np.ndarray) -> np.ndarray:
+    """Space, tab, CR or LF, per byte (comparisons: faster than a table lookup on megabytes)."""
+    return (text == 32) | (text == 10) | (text == 9) | (text == 13)
+
+
+def _has_unusual_space(data: bytes) -> bool:
+    return any(byte in data for byte in UNUSUAL_SPACE)
 
 
 def _bulk_numbers(text: np.ndarray, dtype, count: int) -> np.ndarray | None:
@@ -157,7 +165,7 @@ def _bulk_numbers(text: np.ndarray, dtype, count: int) -> np.ndarray | None:
 def _tokens(text: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Start of every whitespace-separated token of ``text`` (uint8, lines ending in newline) as a
     boolean per byte, and the line (counted within ``text``) of each token."""
-    space = SPACE[text]
+    space = _is_space(text)
     start = ~space & np.concatenate([[True], space[:-1]])
     return start, np.searchsorted(np.flatnonzero(text == 10), np.flatnonzero(start))
 
@@ -167,16 +175,16 @@ def _read_obj_bulk(data: bytes) -> Polygons | None:
     when a record needs the line parser (which then reads the unusual form or names the problem), so
     both give the same result on every file."""
     text = np.frombuffer(data + b"\n", dtype=np.uint8)
-    if UNUSUAL_SPACE[text].any():
+    if _has_unusual_space(data):
         return None
     ends = np.flatnonzero(text == 10)
     starts = np.concatenate([[0], ends[:-1] + 1])
     first, second = text[starts], text[np.minimum(starts + 1, len(text) - 1)]
-    keyed = (ends - starts >= 2) & SPACE[second]
+    keyed = (ends - starts >= 2) & _is_space(second)
     is_vertex, is_face = keyed & (first == ord("v")), keyed & (first == ord("f"))
     if np.any((ends - starts == 1) & np.isin(first, (ord("v"), ord("f")))):
         return None   # a bare keyword
-    blank_start = np.flatnonzero(SPACE[first] & (ends > starts))
+    blank_start = np.flatnonzero(_is_space(first) & (ends > starts))
     if any(data[starts[line]:ends[line]].strip() for line in blank_start):
         return None   # a record after whitespace
     kind = np.zeros(len(starts), dtype=np.int8)
@@ -203,7 +211,7 @@ def _read_obj_bulk(data: bytes) -> Polygons | None:
         slashes = np.cumsum(slash, dtype=np.int32)
         slashes_before = np.concatenate([[0], (slashes - slash)[start]])   # per token; 0 before the first
         after_slash = slashes - slashes_before[np.cumsum(start, dtype=np.int32)] > 0
-        face_text[after_slash & ~SPACE[face_text]] = ord(" ")
+        face_text[after_slash & ~_is_space(face_text)] = ord(" ")
     if not INDEX_BYTES[face_text].all():
         return None
     indices = _bulk_numbers(face_text, np.int64, len(token_line))
@@ -259,7 +267,7 @@ def _read_off_bulk(data: bytes) -> Polygons | None:
     if b"#" in data:
         return None
     text = np.frombuffer(data + b"\n", dtype=np.uint8)
-    if UNUSUAL_SPACE[text].any():
+    if _has_unusual_space(data):
         return None
     start, token_line = _tokens(text)
     new_line = np.concatenate([[True], token_line[1:] != token_line[:-1]])
@@ -286,7 +294,7 @@ def _read_off_bulk(data: bytes) -> Polygons | None:
         return None
     vertices = values[vertex_first[:, None] + np.arange(3)]
     token_starts = np.flatnonzero(start)   # a token's bytes run to the next token's start (spaces between)
-    digits_only = ~np.logical_or.reduceat(~(DIGITS[body] | SPACE[body]), token_starts) if len(values) else start[:0]
+    digits_only = ~np.logical_or.reduceat(~(DIGITS[body] | _is_space(body)), token_starts) if len(values) else start[:0]
     integer = ~np.logical_or.reduceat(FLOAT_MARKS[body], token_starts) if len(values) else start[:0]
     sizes = values[face_first]
     if not (digits_only[face_first].all() and np.all(sizes < 2**31)
@@ -348,6 +356,51 @@ def _read_stl(data: bytes) -> Polygons:
     if not data.lstrip()[:5].lower() == b"solid":
         raise _Malformed(f"neither a binary STL (its {len(data)} bytes do not match the triangle count in "
                          f"the header) nor an ASCII one (which starts with 'solid')")
+    bulk = _read_ascii_stl_bulk(data)
+    return bulk if bulk is not None else _read_ascii_stl_by_line(data)
+
+
+STL_KEYWORDS = (b"vertex", b"endfacet", b"solid", b"endsolid", b"facet", b"outer", b"endloop")
+
+
+def _read_ascii_stl_bulk(data: bytes) -> Polygons | None:
+    """The triangles of an ASCII STL whose keywords are lower case and whose facets hold three vertices
+    of three numbers each, parsed in bulk; None when the line parser must read it or name its problem."""
+    text = np.frombuffer(data + b"\n", dtype=np.uint8)
+    if _has_unusual_space(data):
+        return None
+    start, token_line = _tokens(text)
+    new_line = np.concatenate([[True], token_line[1:] != token_line[:-1]])
+    lines, first = token_line[new_line], np.flatnonzero(new_line)   # the non-blank lines, their first token
+    tokens_per_line = np.diff(np.append(first, len(token_line)))
+    at = np.flatnonzero(start)[first]                                # where each line's first word begins
+    width = max(map(len, STL_KEYWORDS)) + 1
+    words = text[np.minimum(at[:, None] + np.arange(width), len(text) - 1)]
+    kind = np.full(len(lines), -1)
+    for index, keyword in enumerate(STL_KEYWORDS):
+        pattern = np.frombuffer(keyword, dtype=np.uint8)
+        kind[np.all(words[:, :len(pattern)] == pattern, axis=1) & _is_space(words[:, len(pattern)])] = index
+    vertex, end_facet = kind == 0, kind == 1
+    facets = kind[vertex | end_facet]   # must run vertex, vertex, vertex, endfacet, ...
+    if (kind < 0).any() or np.any(tokens_per_line[vertex] != 4) or len(facets) % 4 or not np.all(
+            facets.reshape(-1, 4) == [0, 0, 0, 1]):
+        return None
+    work = text.copy()
+    work[at[vertex][:, None] + np.arange(len(STL_KEYWORDS[0]))] = ord(" ")   # the keyword
+    ends = np.flatnonzero(text == 10)
+    line_starts = np.concatenate([[0], ends[:-1] + 1])
+    is_vertex_line = np.zeros(len(ends), dtype=np.int8)
+    is_vertex_line[lines[vertex]] = 1
+    vertex_text = work[np.repeat(is_vertex_line, ends - line_starts + 1) == 1]
+    if not FLOAT_BYTES[vertex_text].all():
+        return None
+    values = _bulk_numbers(vertex_text, np.float64, 3 * np.count_nonzero(vertex))
+    if values is None:
+        return None
+    return _triangle_soup(values.reshape(-1, 3), lines[vertex] + 1)
+
+
+def _read_ascii_stl_by_line(data: bytes) -> Polygons:
     vertices, vertex_lines, in_facet = [], [], 0
     for number, line in enumerate(_lines(data), 1):
         parts = line.split()
