@@ -174,7 +174,8 @@ def angular_cells() -> tuple[str, str]:
     error = (f"default rows (eq. 4): " + ", ".join(f"{s} {100 * default[s]['error']:.3f} %" for s in MODELS)
              + f"; {' / '.join(map(str, limits))} rows on the bunny: "
              + " / ".join(f"{100 * bunny[f'theta_resolution={n}, table=faces']:.2g}" for n in limits) + " %"
-             + src("angular.json"))
+             + src("angular.json") + "; receivers lying on a closed occluder (normals), falsely shadowed: "
+             + caps_error() + src("angular_caps.json"))
     hard = [r for s, r in default.items() if s not in MODELS and r.get("vs_shadow_map") is not None]
     lookup = doc["lookup_rate"]
     speed = (f"{span([default[s]['vs_exact'] for s in MODELS])}× exact's time on the models; faster than the "
@@ -182,6 +183,18 @@ def angular_cells() -> tuple[str, str]:
              f"hard scenes; {lookup['us_per_lookup']:.2g} µs per lookup on {count(lookup['cubes'])} cubes (paper: "
              f"~{lookup['paper_us_per_lookup']:g} µs){src('angular.json')}")
     return error, speed
+
+
+def caps_error() -> str:
+    """The two tables' false shadows on receivers lying on closed occluders, per kind of occluder."""
+    rows = load("angular_caps.json")["rows"]
+    convex = [r for r in rows if r["scene"] in ("sphere", "cylinder", "torus") and r["light"].startswith("directional")]
+    concave = [r for r in rows if r["scene"] == "box_minus_sphere"]
+    return "; ".join(
+        f"{what}: faces {span([100 * r['faces_occluder_false_shadow'] for r in part])} %, loops "
+        f"{span([100 * r['loops_occluder_false_shadow'] for r in part])} %"
+        for what, part in (("curved caps (sphere, torus, cylinder), directional light", convex),
+                           ("box minus sphere", concave)))
 
 
 METHOD_ROWS = [  # method, paper, status (static prose), and the function giving its two figure cells
@@ -202,7 +215,9 @@ METHOD_ROWS = [  # method, paper, status (static prose), and the function giving
      "kernel in `render`, per-point cap count in `shadow_mask`", "done", shadow_volume_cells),
     ("`angular`", "Thakur, Cheng & Miura: ridge-edge loops, span table per θ row built on the device: `table=\"loops\"` "
      "the paper's (ridge-edge crossings paired by §4's rule, chord depth, creases in duplicate), `table=\"faces\"` "
-     "(default, same error, faster: one span per light-facing face, exact depth), binary-search lookups, scan-line "
+     "(default, faster: one span per light-facing face, exact depth; the same error on open meshes and on "
+     "receivers off the occluders, but a receiver on a closed occluder's lit cap meets a neighbouring face's plane "
+     "half a row off its span: see the error cell), binary-search lookups, scan-line "
      "runs in `render`, several lights (`shadow_counts`), light inside", "done", angular_cells),
 ]
 

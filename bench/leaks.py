@@ -3,7 +3,7 @@
     python bench/leaks.py [--subdivisions 6] [--per-edge 16] [--out bench/results/leaks.json]
 
 Receivers sit inside a closed icosphere, each aimed so that its segment to the light crosses the
-surface exactly once, through a float32 edge point or vertex (shadowcl.hard_cases.aimed_receivers):
+surface exactly once, through a float32 edge point or vertex (shadowcl.testing.aimed_receivers):
 every one is in shadow, and each lit receiver is a leak.
 """
 
@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 import shadowcl as sc
-from shadowcl.hard_cases import aimed_receivers, icosphere
+from shadowcl.testing import aimed_receivers, icosphere
 from shadowcl.methods import create_method
 
 LIGHTS = {

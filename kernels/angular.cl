@@ -45,17 +45,19 @@ typedef double real_in;
 typedef float real_in;
 #endif
 
-/* Receiver i in the frame: local = rot (row-major 3x3) @ (world - origin) in double for world input (the
- * normal rotated and normalised); frame float32 input is read as it is. */
+/* Receiver i in the frame, relative to the anchor (a point of the occluders, frame coordinates ax, ay, az:
+ * see ANCHOR_ARGS): p = rot (row-major 3x3) @ (world - origin) - anchor in double for world input (the
+ * normal rotated and normalised); float32 input is read as it is (the host moved it there already). */
 INLINE void load_receiver(const __global real_in *points, const __global real_in *normals, int i,
                           const __global real_in *rot, real_in ox, real_in oy, real_in oz,
+                          const float ax, const float ay, const float az,
                           float *px, float *py, float *pz, float *nx, float *ny, float *nz)
 {
 #if INPUT_F64
     const double x = points[3 * i] - ox, y = points[3 * i + 1] - oy, z = points[3 * i + 2] - oz;
-    *px = (float)(rot[0] * x + rot[1] * y + rot[2] * z);
-    *py = (float)(rot[3] * x + rot[4] * y + rot[5] * z);
-    *pz = (float)(rot[6] * x + rot[7] * y + rot[8] * z);
+    *px = (float)(rot[0] * x + rot[1] * y + rot[2] * z - (double)ax);
+    *py = (float)(rot[3] * x + rot[4] * y + rot[5] * z - (double)ay);
+    *pz = (float)(rot[6] * x + rot[7] * y + rot[8] * z - (double)az);
 #if NORMALS
     const double a = normals[3 * i], b = normals[3 * i + 1], c = normals[3 * i + 2];
     const double len = sqrt(a * a + b * b + c * c);
@@ -64,7 +66,7 @@ INLINE void load_receiver(const __global real_in *points, const __global real_in
     *nz = (float)((rot[6] * a + rot[7] * b + rot[8] * c) / len);
 #endif
 #else
-    (void)rot; (void)ox; (void)oy; (void)oz;
+    (void)rot; (void)ox; (void)oy; (void)oz; (void)ax; (void)ay; (void)az;
     LOAD3(points, i, *px, *py, *pz);
 #if NORMALS
     LOAD3(normals, i, *nx, *ny, *nz);
@@ -113,24 +115,27 @@ INLINE int wrap_row(int k, int rows)
 /* face_rows: one work-item per table face. Writes the face plane (oriented with the light on its
  * positive side; all zeros for an edge-on or zero-area face), the first row (unwrapped) and the number of
  * rows whose centre lies in the face's row-coordinate range (the host sums them per row). */
-__kernel void face_rows(const __global float *vertices, const __global int *faces, const __global int *face_ids,
-                        const int nfaces, const float t0, const float dt, const int rows,
+__kernel void face_rows(const __global float *vertices, const __global float *relative, const __global int *faces,
+                        const __global int *face_ids, const int nfaces, const float t0, const float dt, const int rows,
+                        const float anc_x, const float anc_y, const float anc_z,
                         __global float *planes, __global int *first_row, __global int *row_count)
 {
     const int i = get_global_id(0);
     if (i >= nfaces) return;
     const int f = face_ids[i];
     float x0, y0, z0, x1, y1, z1, x2, y2, z2;
-    LOAD3(vertices, faces[3 * f], x0, y0, z0);
-    LOAD3(vertices, faces[3 * f + 1], x1, y1, z1);
-    LOAD3(vertices, faces[3 * f + 2], x2, y2, z2);
-    /* Face plane */
+    /* Face plane n.x = d from the anchor-relative corners: exact to float32 near the occluders however
+     * far the light (the light-centred corners carry the light's distance in their rounding). */
+    LOAD3(relative, faces[3 * f], x0, y0, z0);
+    LOAD3(relative, faces[3 * f + 1], x1, y1, z1);
+    LOAD3(relative, faces[3 * f + 2], x2, y2, z2);
     const float ax = x1 - x0, ay = y1 - y0, az = z1 - z0, bx = x2 - x0, by = y2 - y0, bz = z2 - z0;
     float nx = ay * bz - az * by, ny = az * bx - ax * bz, nz = ax * by - ay * bx;
     float d = dot3(nx, ny, nz, x0, y0, z0);
 #if LIGHT_POINT
-    const float side = -d;            /* n . (light - v0) with the light at the origin */
+    const float side = -(d + dot3(nx, ny, nz, anc_x, anc_y, anc_z));   /* n . (light - v0), the light at the origin */
 #else
+    (void)anc_x; (void)anc_y; (void)anc_z;
     const float side = nz;            /* n . (towards the light) */
 #endif
     const float flip = side < 0.0f ? -1.0f : 1.0f;
@@ -141,6 +146,9 @@ __kernel void face_rows(const __global float *vertices, const __global int *face
     planes[4 * i + 2] = blocks ? nz : 0.0f;
     planes[4 * i + 3] = blocks ? d : 0.0f;
     /* Row range: the rows whose centre t0 + (k + 0.5) dt lies in [tmin, tmax] */
+    LOAD3(vertices, faces[3 * f], x0, y0, z0);
+    LOAD3(vertices, faces[3 * f + 1], x1, y1, z1);
+    LOAD3(vertices, faces[3 * f + 2], x2, y2, z2);
     float tmin, tmax;
     const float ta = row_coordinate(y0, z0), tb = row_coordinate(y1, z1), tc = row_coordinate(y2, z2);
     bool all_rows = false;
@@ -226,7 +234,8 @@ INLINE void face_span(float x0, float y0, float z0, float x1, float y1, float z1
 }
 
 /* fill_rows: one work-item per table face; writes its record in every row it spans, at the row's
- * offset plus a slot taken from the row's cursor (offsets from the exclusive prefix sum of counts). */
+ * offset plus a slot taken from the row's cursor (offsets from the exclusive prefix sum of counts). A slot
+ * past the row's end is not written; the cursor still counts it and the host checks (check_rows_filled). */
 __kernel void fill_rows(const __global float *vertices, const __global int *faces, const __global int *face_ids,
                         const int nfaces, const float t0, const float dt, const int rows,
                         const __global float *planes, const __global int *first_row, const __global int *row_count,
@@ -246,7 +255,9 @@ __kernel void fill_rows(const __global float *vertices, const __global int *face
         const int k = wrap_row(k0 + j, rows);
         float lo, hi;
         face_span(x0, y0, z0, x1, y1, z1, x2, y2, z2, t0 + ((float)k + 0.5f) * dt, &lo, &hi);
-        __global float *r = records + (size_t)REC * (offsets[k] + atomic_inc(&cursor[k]));
+        const int slot = offsets[k] + atomic_inc(&cursor[k]);
+        if (slot >= offsets[k + 1]) continue;
+        __global float *r = records + (size_t)REC * slot;
         r[0] = lo;
         r[1] = hi;
         r[2] = planes[4 * i];
@@ -352,7 +363,7 @@ __kernel void edge_rows(const __global float *vertices, const __global int *tail
 }
 
 /* fill_edges: one work-item per ridge edge; its crossing record in every row it crosses, at the row's
- * offset plus a slot from the row's cursor. */
+ * offset plus a slot from the row's cursor; past the row's end nothing is written (as fill_rows). */
 __kernel void fill_edges(const __global float *vertices, const __global int *tails, const __global int *heads,
                          const __global int *group, const int nedges, const int nridge, const float t0, const float dt,
                          const int rows,
@@ -384,7 +395,9 @@ __kernel void fill_edges(const __global float *vertices, const __global int *tai
 #else
         const float s = cx;
 #endif
-        __global float *c = crossings + (size_t)REC * (offsets[k] + atomic_inc(&cursor[k]));
+        const int slot = offsets[k] + atomic_inc(&cursor[k]);
+        if (slot >= offsets[k + 1]) continue;
+        __global float *c = crossings + (size_t)REC * slot;
         c[0] = s; c[1] = cx; c[2] = cy; c[3] = cz; c[4] = up;
         c[5] = as_float(group[i]);
         c[6] = as_float(i);
@@ -418,7 +431,7 @@ __kernel void fill_poles(const __global float *poles, const __global int *pole_r
 {
     const int k = get_global_id(0);
     if (k >= rows) return;
-    for (int j = 0; j < npoles; ++j) {
+    for (int j = 0; j < npoles && offsets[k] + j < offsets[k + 1]; ++j) {   /* the host counts npoles a row */
         __global float *c = crossings + (size_t)REC * (offsets[k] + j);
         const float x = poles[j];
         c[0] = x > 0.0f ? 1.0f : -1.0f;
@@ -438,7 +451,8 @@ __kernel void fill_poles(const __global float *poles, const __global int *pole_r
  * loop (a planar face, a terminator's plane) keeps its own depth; along the row plane's normal instead,
  * receivers on the occluder's own lit cap fell on the wrong side of it (half of them, cube over plane). */
 INLINE void write_pair(__global float *out, const __global float *ca, const __global float *cb, float tk,
-                       const __global float *vertices, const __global int *tails, const __global int *heads)
+                       const __global float *vertices, const __global int *tails, const __global int *heads,
+                       const float anc_x, const float anc_y, const float anc_z)
 {
     float ax, ay, az, bx, by, bz;
     edge_direction(vertices, tails, heads, ca, &ax, &ay, &az);
@@ -466,14 +480,15 @@ INLINE void write_pair(__global float *out, const __global float *ca, const __gl
     const float flip = side < 0.0f ? -1.0f : (side > 0.0f ? 1.0f : 0.0f);   /* 0: degenerate, never blocks */
     out[0] = SC_MIN(ca[0], cb[0]);
     out[1] = SC_MAX(ca[0], cb[0]);
-    out[2] = nx * flip; out[3] = ny * flip; out[4] = nz * flip; out[5] = d * flip;
+    out[2] = nx * flip; out[3] = ny * flip; out[4] = nz * flip;
+    out[5] = (d - dot3(nx, ny, nz, anc_x, anc_y, anc_z)) * flip;     /* relative to the anchor, as face records */
     out[6] = as_float(-(as_int(ca[5]) + 1));
     out[7] = 0.0f;
 }
 
 /* pair_rows: one work-item per row. Sorts the row's crossings by (region, kind, s) and pairs each lit
  * region's ridge crossings by section 4's rule: in s order, a crossing going the way the region's first
- * one goes (or any while none waits) waits; one going the other way pairs with the oldest waiting (first
+ * one goes (or anc_y while none waits) waits; one going the other way pairs with the oldest waiting (first
  * in, first out), so the chains leaving a local theta peak bound one span and coils pair correctly; a
  * region's outer loop and its holes pair together (a torus lit from above: its hole stays lit). Each pair
  * is then cut at the region's crease duplicates inside it (section 5): A h1, h1 h2, ..., hn B.
@@ -481,7 +496,8 @@ INLINE void write_pair(__global float *out, const __global float *ca, const __gl
  * (the host grows cap and reruns). queue: int scratch as long as the crossings. */
 __kernel void pair_rows(const __global int *offsets, const int rows, const float t0, const float dt,
                         const __global float *vertices, const __global int *tails, const __global int *heads,
-                        const int cap, __global float *crossings, __global int *queue, __global float *pairs,
+                        const int cap, const float anc_x, const float anc_y, const float anc_z,
+                        __global float *crossings, __global int *queue, __global float *pairs,
                         __global int *npairs, volatile __global int *overflow)
 {
     const int k = get_global_id(0);
@@ -510,11 +526,11 @@ __kernel void pair_rows(const __global int *offsets, const int rows, const float
             for (; d < n && as_int(c[REC * d + 5]) == region; ++d) {
                 const float sd = c[REC * d];
                 if (sd <= lo || sd >= hi) continue;
-                if (p < limit) write_pair(out + REC * p, c + REC * from, c + REC * d, tk, vertices, tails, heads);
+                if (p < limit) write_pair(out + REC * p, c + REC * from, c + REC * d, tk, vertices, tails, heads, anc_x, anc_y, anc_z);
                 ++p;
                 from = d;
             }
-            if (p < limit) write_pair(out + REC * p, c + REC * from, c + REC * j, tk, vertices, tails, heads);
+            if (p < limit) write_pair(out + REC * p, c + REC * from, c + REC * j, tk, vertices, tails, heads, anc_x, anc_y, anc_z);
             ++p;
         }
         while (j < n && as_int(c[REC * j + 5]) == region) ++j;       /* skip the region's duplicates */
@@ -536,28 +552,34 @@ __kernel void copy_pairs(const __global int *src_offsets, const __global int *np
         vstore8(vload8(cap * src_offsets[k] + j, pairs), dst_offsets[k] + j, records);
 }
 
-/* The face of record r blocks the segment from p to the light, further than eps from p. */
-INLINE bool record_blocks(const __global float *r, float px, float py, float pz, float dist, float eps)
+/* The face of record r blocks the segment from p to the light, further than eps from p. p (px, py, pz) and
+ * the plane's offset r[5] are relative to the anchor (an, its position from the light): the height of p
+ * over the plane, dq = n.p - d, is then as exact as float32 near the occluders allows, whatever the
+ * light's distance; n.(p + an) is p's own offset from the light's plane parallel to it. */
+INLINE bool record_blocks(const __global float *r, float px, float py, float pz, float anc_x, float anc_y, float anc_z,
+                          float dist, float eps)
 {
-    const float q = dot3(r[2], r[3], r[4], px, py, pz);
+    const float dq = dot3(r[2], r[3], r[4], px, py, pz) - r[5];
 #if LIGHT_POINT
-    /* hit at t p, t = d / q in (0, 1) when q < d < 0; its distance from p is (1 - t) |p| > eps */
-    return (q - r[5]) * dist < eps * q;
+    /* light-centred: hit at t p, t = d / q in (0, 1) when q < d < 0; its distance from p is
+     * (1 - t) |p| = (q - d) / q |p| > eps */
+    const float q = dot3(r[2], r[3], r[4], px + anc_x, py + anc_y, pz + anc_z);
+    return dq * dist < eps * q;
 #else
-    (void)dist;
-    return r[5] - q > eps * r[4];            /* hit (d - q) / nz above p, nz > 0 */
+    (void)dist; (void)anc_x; (void)anc_y; (void)anc_z;
+    return -dq > eps * r[4];                 /* hit (d - q) / nz above p, nz > 0 */
 #endif
 }
 
 /* Receiver set-up: row, key s and distance; with normals a back-facing receiver is shadowed (code 1)
  * and the others are moved eps along the normal. Returns -1 for "shadowed by facing", else the row
  * (-2 outside the table: lit). */
-INLINE int receiver_row(float *px, float *py, float *pz, float nx, float ny, float nz, float eps,
-                        float t0, float inv_dt, int rows, float *s, float *dist)
+INLINE int receiver_row(float *px, float *py, float *pz, float anc_x, float anc_y, float anc_z, float nx, float ny, float nz,
+                        float eps, float t0, float inv_dt, int rows, float *s, float *dist)
 {
 #if NORMALS
 #if LIGHT_POINT
-    if (dot3(nx, ny, nz, -*px, -*py, -*pz) <= 0.0f) return -1;
+    if (dot3(nx, ny, nz, -(*px + anc_x), -(*py + anc_y), -(*pz + anc_z)) <= 0.0f) return -1;
 #else
     if (nz <= 0.0f) return -1;
 #endif
@@ -565,13 +587,14 @@ INLINE int receiver_row(float *px, float *py, float *pz, float nx, float ny, flo
 #else
     (void)nx; (void)ny; (void)nz;
 #endif
-    *dist = SC_SQRT(*px * *px + *py * *py + *pz * *pz);
+    const float lx = *px + anc_x, ly = *py + anc_y, lz = *pz + anc_z;   /* light-centred */
+    *dist = SC_SQRT(lx * lx + ly * ly + lz * lz);
 #if LIGHT_POINT
-    *s = *dist > 0.0f ? *px / *dist : 0.0f;
+    *s = *dist > 0.0f ? lx / *dist : 0.0f;
 #else
-    *s = *px;
+    *s = lx;
 #endif
-    const int k = row_of(row_coordinate(*py, *pz), t0, inv_dt, rows);
+    const int k = row_of(row_coordinate(ly, lz), t0, inv_dt, rows);
     return k < 0 ? -2 : k;
 }
 
@@ -582,7 +605,8 @@ INLINE int receiver_row(float *px, float *py, float *pz, float nx, float ny, flo
  * or before s (prev_hi), the first s_lo after s (next_lo, the paper's nextX), and up to two records
  * containing s that do not block p (c0, c1; inside counts them all). */
 INLINE int row_lookup(const __global float *records, int begin, int end, float s, float px, float py, float pz,
-                      float dist, float eps, float *prev_hi, float *next_lo, int *c0, int *c1, int *inside)
+                      float anc_x, float anc_y, float anc_z, float dist, float eps, float *prev_hi, float *next_lo,
+                      int *c0, int *c1, int *inside)
 {
     int lo = begin, hi = end;
     while (lo < hi) {
@@ -601,7 +625,7 @@ INLINE int row_lookup(const __global float *records, int begin, int end, float s
             break;
         }
         if (r[1] >= s) {
-            if (record_blocks(r, px, py, pz, dist, eps)) return j;
+            if (record_blocks(r, px, py, pz, anc_x, anc_y, anc_z, dist, eps)) return j;
             *c1 = *inside == 1 ? j : *c1;
             *c0 = *inside == 0 ? j : *c0;
             ++*inside;
@@ -616,30 +640,30 @@ INLINE int row_lookup(const __global float *records, int begin, int end, float s
  * out[i] = 1 in shadow, 0 lit: row_lookup, first hit wins. */
 __kernel void angular_classify(const __global real_in *points, const __global real_in *normals, const int n,
                                const __global real_in *rot, const real_in ox, const real_in oy, const real_in oz,
-                               const float t0, const float inv_dt, const int rows, const float eps,
+                               const float anc_x, const float anc_y, const float anc_z, const float t0, const float inv_dt, const int rows, const float eps,
                                const __global int *offsets, const __global float *records,
                                __global uchar *out)
 {
     const int i = get_global_id(0);
     if (i >= n) return;
     float px, py, pz, nx = 0.0f, ny = 0.0f, nz = 0.0f, s, dist;
-    load_receiver(points, normals, i, rot, ox, oy, oz, &px, &py, &pz, &nx, &ny, &nz);
-    const int k = receiver_row(&px, &py, &pz, nx, ny, nz, eps, t0, inv_dt, rows, &s, &dist);
+    load_receiver(points, normals, i, rot, ox, oy, oz, anc_x, anc_y, anc_z, &px, &py, &pz, &nx, &ny, &nz);
+    const int k = receiver_row(&px, &py, &pz, anc_x, anc_y, anc_z, nx, ny, nz, eps, t0, inv_dt, rows, &s, &dist);
     uchar shadow = k == -1;
     if (k >= 0) {
         float prev_hi, next_lo;
         int c0, c1, inside;
-        shadow = row_lookup(records, offsets[k], offsets[k + 1], s, px, py, pz, dist, eps, &prev_hi, &next_lo,
+        shadow = row_lookup(records, offsets[k], offsets[k + 1], s, px, py, pz, anc_x, anc_y, anc_z, dist, eps, &prev_hi, &next_lo,
                             &c0, &c1, &inside) >= 0;
     }
     out[i] = shadow;
 }
 
-INLINE bool record_hits(const __global float *records, int j, float s, float px, float py, float pz, float dist,
-                        float eps)
+INLINE bool record_hits(const __global float *records, int j, float s, float px, float py, float pz, float anc_x,
+                        float anc_y, float anc_z, float dist, float eps)
 {
     const __global float *r = records + (size_t)REC * j;
-    return j >= 0 && r[0] <= s && s <= r[1] && record_blocks(r, px, py, pz, dist, eps);
+    return j >= 0 && r[0] <= s && s <= r[1] && record_blocks(r, px, py, pz, anc_x, anc_y, anc_z, dist, eps);
 }
 
 /* angular_runs: one work-item per scan line of the camera image; its receivers are
@@ -653,7 +677,7 @@ INLINE bool record_hits(const __global float *records, int j, float s, float px,
  * lookups[l] counts the full lookups of line l. */
 __kernel void angular_runs(const __global real_in *points, const __global real_in *normals,
                            const __global real_in *rot, const real_in ox, const real_in oy, const real_in oz,
-                           const __global int *line_start, const int lines, const float t0, const float inv_dt, const int rows, const float eps,
+                           const float anc_x, const float anc_y, const float anc_z, const __global int *line_start, const int lines, const float t0, const float inv_dt, const int rows, const float eps,
                            const __global int *offsets, const __global float *records,
                            __global uchar *out, __global int *lookups)
 {
@@ -664,14 +688,14 @@ __kernel void angular_runs(const __global real_in *points, const __global real_i
     const int end_i = line_start[l + 1];
     for (int i = line_start[l]; i < end_i; ++i) {
         float px, py, pz, nx = 0.0f, ny = 0.0f, nz = 0.0f, s, dist;
-        load_receiver(points, normals, i, rot, ox, oy, oz, &px, &py, &pz, &nx, &ny, &nz);
-        const int k = receiver_row(&px, &py, &pz, nx, ny, nz, eps, t0, inv_dt, rows, &s, &dist);
+        load_receiver(points, normals, i, rot, ox, oy, oz, anc_x, anc_y, anc_z, &px, &py, &pz, &nx, &ny, &nz);
+        const int k = receiver_row(&px, &py, &pz, anc_x, anc_y, anc_z, nx, ny, nz, eps, t0, inv_dt, rows, &s, &dist);
         if (k < 0) {
             out[i] = k == -1;
             continue;
         }
         if (k == cur_row && mode != 0 && (mode == 1 ? (s >= lo && s <= hi) : (s > lo && s < hi))) {
-            if (record_hits(records, c0, s, px, py, pz, dist, eps) || record_hits(records, c1, s, px, py, pz, dist, eps)) {
+            if (record_hits(records, c0, s, px, py, pz, anc_x, anc_y, anc_z, dist, eps) || record_hits(records, c1, s, px, py, pz, anc_x, anc_y, anc_z, dist, eps)) {
                 out[i] = 1;
                 continue;
             }
@@ -685,7 +709,7 @@ __kernel void angular_runs(const __global real_in *points, const __global real_i
         cur_row = k;
         float prev_hi, next_lo;
         int inside;
-        const int hit = row_lookup(records, offsets[k], offsets[k + 1], s, px, py, pz, dist, eps, &prev_hi, &next_lo,
+        const int hit = row_lookup(records, offsets[k], offsets[k + 1], s, px, py, pz, anc_x, anc_y, anc_z, dist, eps, &prev_hi, &next_lo,
                                    &c0, &c1, &inside);
         if (hit >= 0) {
             mode = 1;

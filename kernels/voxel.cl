@@ -244,3 +244,58 @@ __kernel void write_states(__global const uint *leaves, int nsamples, __global c
     if (phase == 1 && state[s] == 2 && ((frame[id >> 4] >> shift) & 3u) == 3u)
         atomic_and(&frame[id >> 4], ~(1u << shift));
 }
+
+/* The state (0 empty, 1 lit, 2 shadowed) of linear voxel id v: from the 2-bit frame buffer `frame`
+ * (SPARSE 0), or by binary search in the sorted voxel ids `keys` (nkeys, uint) with their `values` (SPARSE
+ * 1: section 5.1, no frame buffer). */
+#ifndef SPARSE
+#define SPARSE 0
+#endif
+INLINE uint voxel_state(const __global uint *frame, const __global uint *keys, const __global uchar *values,
+                        int nkeys, uint v)
+{
+#if SPARSE
+    int lo = 0, hi = nkeys;
+    while (lo < hi) {
+        const int mid = (lo + hi) >> 1;
+        if (keys[mid] < v) lo = mid + 1; else hi = mid;
+    }
+    return lo < nkeys && keys[lo] == v ? (uint)values[lo] : 0u;
+#else
+    return (frame[v >> 4] >> (2u * (v & 15u))) & 3u;
+#endif
+}
+
+/* lookup_states: one work-item per linear voxel id; states[i] = its state. */
+__kernel void lookup_states(const __global uint *ids, int n, const __global uint *frame, const __global uint *keys,
+                            const __global uchar *values, int nkeys, __global uchar *states)
+{
+    const int i = get_global_id(0);
+    if (i >= n) return;
+    states[i] = (uchar)voxel_state(frame, keys, values, nkeys, ids[i]);
+}
+
+/* locate_states: one work-item per point, given its voxel (i, j, k) (computed on the host in float64,
+ * possibly outside the grid). Its voxel's id and state when occupied, else the first occupied voxel
+ * among `offsets` (noffsets (di, dj, dk), nearest first: classify's search), else id -1, state 0. */
+__kernel void locate_states(const __global int *ijk, int n, int resolution, const __global int *offsets, int noffsets,
+                            const __global uint *frame, const __global uint *keys, const __global uchar *values,
+                            int nkeys, __global int *ids, __global uchar *states)
+{
+    const int p = get_global_id(0);
+    if (p >= n) return;
+    const int x = ijk[3 * p], y = ijk[3 * p + 1], z = ijk[3 * p + 2];
+    int id = -1;
+    uint state = 0u;
+    for (int j = -1; j < noffsets && state == 0u; ++j) {     /* j = -1: the point's own voxel */
+        const int cx = j < 0 ? x : x + offsets[3 * j], cy = j < 0 ? y : y + offsets[3 * j + 1],
+                  cz = j < 0 ? z : z + offsets[3 * j + 2];
+        if (cx < 0 || cy < 0 || cz < 0 || cx >= resolution || cy >= resolution || cz >= resolution)
+            continue;
+        const uint v = ((uint)cx * (uint)resolution + (uint)cy) * (uint)resolution + (uint)cz;
+        state = voxel_state(frame, keys, values, nkeys, v);
+        if (state != 0u) id = (int)v;
+    }
+    ids[p] = id;
+    states[p] = (uchar)state;
+}

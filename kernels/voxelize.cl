@@ -17,7 +17,8 @@
  * Fixed capacities: `counters[0]` counts children items wanted (written only below `out_capacity`),
  * `counters[1]` leaves (written only below `leaf_capacity`), `counters[2]` forced leaves. The host
  * checks both against the capacities and, on overflow, grows the buffers and reruns the level with the
- * leaf counter restored (frame-buffer writes are idempotent ORs).
+ * leaf counter restored (frame-buffer writes are idempotent ORs). The host never launches a level whose
+ * counters could pass INT_MAX (voxelize.COUNTER_MAX); a negative slot is refused here all the same.
  *
  * Leaf record (LEAF_WORDS = 20 32-bit words): patch, level, iu, iv (uint), the four corner positions
  * (12 float), the four corner voxels' linear indices (i * R + j) * R + k (uint; R <= 1024).
@@ -99,10 +100,10 @@ __kernel void voxelize_level(__global const float *points, __global const uint *
     if (!small && !tiny && level < MAX_DEPTH) {
         /* Split: four children at level + 1 */
         const int slot = atomic_add(&counters[0], 4);
-        if (slot + 4 > out_capacity)
+        if (slot < 0 || slot > out_capacity - 4)
             return;
         for (int c = 0; c < 4; ++c) {
-            __global uint *o = items_out + 4 * (slot + c);
+            __global uint *o = items_out + 4 * ((size_t)slot + c);
             o[0] = patch; o[1] = level + 1u; o[2] = 2u * iu + (uint)(c & 1); o[3] = 2u * iv + (uint)(c >> 1);
         }
         return;
@@ -118,9 +119,9 @@ __kernel void voxelize_level(__global const float *points, __global const uint *
     for (int c = 0; c < 4; ++c)
         atomic_or(&frame[ids[c] >> 4], 3u << (2u * (ids[c] & 15u)));
 #endif
-    if (slot >= leaf_capacity)
+    if (slot < 0 || slot >= leaf_capacity)
         return;
-    __global uint *r = leaves + LEAF_WORDS * slot;
+    __global uint *r = leaves + (size_t)LEAF_WORDS * slot;
     r[0] = patch; r[1] = level; r[2] = iu; r[3] = iv;
     for (int k = 0; k < 12; ++k)
         r[4 + k] = as_uint(pos[k]);

@@ -597,3 +597,15 @@ def test_bench_quick(tmp_path):
     assert tables == set(angular.TABLES)
     assert {p["table"] for p in doc["scalability"]["points"]} == set(angular.TABLES)
     assert "Tables at theta_resolution=None" in (tmp_path / "angular-quick.md").read_text()
+
+
+@pytest.mark.parametrize("table, kernel", [("faces", "fill_rows"), ("loops", "fill_edges")])
+def test_fills_never_write_past_their_rows(device, monkeypatch, table, kernel):
+    """The fills write behind the rows' counts: given too few slots (a quarter of the counted records),
+    a fill drops the writes past each row's end and the host raises, naming the kernel, instead of
+    writing out of bounds or returning a short table."""
+    counts = angular.row_counts
+    monkeypatch.setattr(angular, "row_counts", lambda *args: counts(*args) // 4)
+    with pytest.raises(RuntimeError, match=f"angular {kernel}: .* rows got more records than counted"):
+        prepared(device, torus_over_plane(), sc.PointLight((0.3, 3.0, 0.2)), ground_points(np.random.default_rng(2), 10),
+                 theta_resolution=64, table=table)

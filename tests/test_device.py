@@ -26,10 +26,22 @@ def kernel_dir(tmp_path):
     return tmp_path
 
 
-def test_default_device_prefers_cpu(device):
-    assert device.cl_device.type & cl.device_type.CPU or not any(
-        d.type & cl.device_type.CPU for _, _, d in sc.list_devices()
-    )
+def test_default_device_prefers_gpu(monkeypatch):
+    """Without a selector: the first GPU, else the first CPU, else any device; a selector wins."""
+    class Fake:
+        def __init__(self, name, kind):
+            self.name, self.type = name, kind
+
+    cpu, gpu, other = Fake("cpu", cl.device_type.CPU), Fake("gpu", cl.device_type.GPU), Fake("acc", cl.device_type.ACCELERATOR)
+    monkeypatch.delenv("SHADOWCL_DEVICE", raising=False)
+    monkeypatch.delenv("PYOPENCL_CTX", raising=False)
+    for devices, want in (([cpu, gpu], gpu), ([other, cpu], cpu), ([other], other)):
+        monkeypatch.setattr(device_module, "list_devices",
+                            lambda devices=devices: [(f"0:{i}", d.name, d) for i, d in enumerate(devices)])
+        assert device_module._default_device() is want
+    monkeypatch.setenv("SHADOWCL_DEVICE", "cpu")                 # told otherwise: the named device
+    monkeypatch.setattr(device_module, "list_devices", lambda: [("0:0", "gpu", gpu), ("0:1", "cpu", cpu)])
+    assert device_module._default_device() is cpu
 
 
 def test_select_by_index_name_and_environment(monkeypatch):

@@ -15,7 +15,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import shadowcl as sc
-from shadowcl.hard_cases import aimed_receivers, icosphere
+from shadowcl.testing import aimed_receivers, icosphere
 from shadowcl import exact as exact_module
 from shadowcl.exact import ExactMethod
 from shadowcl.methods import default_eps

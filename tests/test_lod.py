@@ -12,7 +12,7 @@ import pytest
 
 import shadowcl as sc
 from shadowcl import lod
-from shadowcl.hard_cases import icosphere
+from shadowcl.testing import icosphere
 from shadowcl.metrics import mask_error
 from shadowcl.methods import default_eps
 from shadowcl.reference import exact as ref

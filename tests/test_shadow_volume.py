@@ -11,7 +11,7 @@ import pytest
 import shadowcl as sc
 from shadowcl import raster
 from shadowcl.geometry import bounds_diagonal
-from shadowcl.hard_cases import icosphere
+from shadowcl.testing import icosphere
 from shadowcl.methods import create_method, default_eps
 from shadowcl.reference import exact as exact_ref
 from shadowcl.reference import raster as raster_ref

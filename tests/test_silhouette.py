@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import shadowcl as sc
-from shadowcl.hard_cases import icosphere
+from shadowcl.testing import icosphere
 from shadowcl.reference import silhouette as ref
 from shadowcl.silhouette import (NONMANIFOLD, Silhouette, SilhouetteTracker, edge_adjacency, host_facing,
                                  silhouette_edges, silhouette_loops, vertex_balance)

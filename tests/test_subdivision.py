@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 import shadowcl as sc
-from shadowcl.reference.subdivision import ControlMesh, RefinedSurface, refine, vertex_limit
+from shadowcl.reference.subdivision import ControlMesh, RefinedSurface, refine, tessellation_grid, vertex_limit
 from shadowcl.subdivision import PatchTable, SubdivisionSurface
+from shadowcl.subdivision.tessellation import tessellation
 
 from conftest import SCENES, require_models
 
@@ -470,6 +471,39 @@ def edge_use_counts(mesh: sc.Mesh) -> np.ndarray:
     return counts
 
 
+def mixed_cage(rng):
+    """Not a shared model: a pentagonal prism of quads, its bottom a fan of triangles round a centre, a
+    ring of quads round its top, a pentagon over the ring and a border between, faces shuffled."""
+    k = 5
+    angle = 2 * np.pi * np.arange(k) / k
+    ring = lambda y, r: np.stack([r * np.cos(angle), np.full(k, y), r * np.sin(angle)], 1)   # noqa: E731
+    vertices = np.vstack([ring(0, 1), ring(1, 1), [[0, -0.3, 0]], ring(1, 2)]) + 0.01 * rng.standard_normal((3 * k + 1, 3))
+    i, j = np.arange(k), (np.arange(k) + 1) % k
+    faces = [[i[m], j[m], k + j[m], k + i[m]] for m in range(k)]              # sides: quads
+    faces += [[2 * k, j[m], i[m]] for m in range(k)]                            # bottom: triangles round a centre
+    faces += [[k + i[m], k + j[m], 2 * k + 1 + j[m], 2 * k + 1 + i[m]] for m in range(k)]   # top ring: a border
+    faces += [list(range(2 * k + 1, 3 * k + 1))]                                 # a pentagon over the ring
+    order = rng.permutation(len(faces))
+    return vertices, [faces[o] for o in order]
+
+
+@pytest.mark.parametrize("segments", [1, 2, 3, 4, 7, 8, 16])
+def test_tessellation_grid_matches_the_loop_reference(segments, rng):
+    """The vectorised grid against the per-sample dictionary loop it replaced: the same points, in the
+    same order, the same triangles and cell centres (exact: these are indices and dyadic parameters),
+    on quads only (odd segments allowed), on mixed n-gons with borders, and on a random grid cage."""
+    cages = [grid_cage(5, rng)]
+    if segments % 2 == 0:
+        cages += [mixed_cage(rng), pole_disc(7, rng)]
+    for vertices, faces in cages:
+        faces = [np.asarray(f) for f in faces]
+        got, want = tessellation(faces, segments), tessellation_grid(faces, segments)
+        for name, g, w in zip(("face", "u", "v", "triangles"), got[:4], want[:4]):
+            assert g.shape == w.shape and np.array_equal(g, w), f"{name}: segments {segments}, {len(faces)} faces"
+        for g, w in zip(got[4], want[4]):
+            assert np.array_equal(g, w), f"centres: segments {segments}"
+
+
 @pytest.mark.parametrize("name", ["catmark_cube", "catmark_gregory_test8", "catmark_pyramid", "catmark_torus"])
 def test_tessellation_of_a_closed_cage_is_watertight(name):
     """Crack-free: every edge of the triangle mesh of a closed control mesh is used exactly twice."""
@@ -485,7 +519,7 @@ def test_tessellation_vertices_lie_on_the_limit_surface(rng):
     surface = SubdivisionSurface.load(ccss("catmark_pyramid"))
     reference = RefinedSurface(surface.vertices, surface.faces, 3)
     mesh = surface.tessellate(segments=4)
-    face, u, v, _, _ = surface._tessellation(4)
+    face, u, v, _, _ = tessellation(surface.faces, 4)
     want = np.array([reference.limit_point(f, a, b) for f, a, b in zip(face, u, v)])
     compare("pyramid tessellation", mesh.vertices, want, POSITION_TOL * np.abs(surface.vertices).max())
 

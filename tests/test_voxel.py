@@ -10,6 +10,7 @@ from shadowcl import voxel
 from shadowcl import voxelize as vz
 from shadowcl.reference import voxel as ref
 from shadowcl.subdivision import SubdivisionSurface
+from shadowcl.testing import grid_patch_table
 
 from conftest import SCENES, require_models
 from test_voxelize import torus_net
@@ -21,7 +22,7 @@ def ground_net(size=3.0, height=-0.6, count=10):
 
 
 def torus_on_ground():
-    return vz.merge_tables([vz.grid_patch_table(torus_net(), True, True), vz.grid_patch_table(ground_net())])
+    return vz.merge_tables([grid_patch_table(torus_net(), True, True), grid_patch_table(ground_net())])
 
 
 BOX = np.array([[-3.0, -3.0, -1.0], [3.0, 3.0, 1.0]])
@@ -107,7 +108,7 @@ def test_without_frame_buffer_same_answers(device, rng, determination):
 
 def test_lit_plane_does_not_shadow_itself(device):
     """Figure 1: a plane under grazing light is lit everywhere (topology-based)."""
-    plane = vz.grid_patch_table(ground_net())
+    plane = grid_patch_table(ground_net())
     for elevation in (2.0, 10.0, 45.0):
         e = np.radians(elevation)
         light = sc.DirectionalLight((np.cos(e), 0.3, -np.sin(e)))
@@ -134,9 +135,35 @@ def test_classify_and_visibility(device):
     # normals facing away are in shadow
     away = np.tile([0.0, 0.0, -1.0], (len(samples), 1))
     assert m.classify(samples, away).all()
-    # a point far from every surface is classified lit, with a warning
-    with pytest.warns(UserWarning, match="more than 2 voxels"):
-        assert not m.classify(np.array([[2.5, 2.5, 0.9]]))[0]
+    # a point far from every surface is classified lit and counted (unplaced="lit", the default)
+    assert not m.classify(np.array([[2.5, 2.5, 0.9]]))[0] and m.stats["unplaced"] == 1
+
+
+@pytest.mark.parametrize("frame_buffer", [True, False])
+def test_locate_kernel_matches_reference(device, rng, frame_buffer):
+    """classify's device lookup (locate_states) against a NumPy search of the dense states: points on the
+    samples, scattered up to 3.5 voxels off them (in their voxel, in ring 1, ring 2, beyond), outside the
+    grid, and far away; in the frame buffer (5.2) and in the sorted sparse states (5.1)."""
+    m = prepared(device, torus_on_ground(), LIGHTS["point"], "topology", resolution=32, frame_buffer=frame_buffer)
+    m.classify(np.zeros((1, 3)))                  # without a frame buffer (5.1) classify voxelizes and determines
+    corners = m.vox.corners.reshape(-1, 3).astype(np.float64)
+    h = m.vox.voxel_size
+    points = np.concatenate([
+        corners[rng.choice(len(corners), 400)] + rng.uniform(-3.5, 3.5, (400, 3)) * h,
+        m.vox.origin + rng.uniform(-3, m.vox.resolution + 3, (300, 3)) * h,      # around and outside the grid
+        [[1e6, -1e6, 3e5], [-1e30, 0.0, 0.0]],                                   # far away
+    ])
+    keys, values = voxel.sparse_states(m.vox.corner_voxels.ravel(), m.sample_states)
+    dense = np.zeros(m.vox.resolution ** 3, np.uint8)
+    dense[keys] = values
+    want_ids, want_states = ref.locate(dense.reshape((m.vox.resolution,) * 3), points, m.vox.origin, h)
+    ids, states = m._locate(points)
+    assert np.array_equal(states, want_states) and np.array_equal(ids, want_ids)
+    assert 0 < np.sum(want_ids < 0) < len(points) and np.any(want_states == 2)
+    # unplaced="raise": a named error instead of calling them lit
+    strict = prepared(device, torus_on_ground(), LIGHTS["point"], "topology", resolution=32, unplaced="raise")
+    with pytest.raises(ValueError, match=r"points: \d+ of 702 are more than 2 voxels"):
+        strict.classify(points)
 
 
 def test_scene_with_triangles_is_refused(device):
@@ -162,6 +189,7 @@ def test_shadow_mask_on_a_scene(device):
     (dict(resolution=0), ValueError, "resolution"),
     (dict(resolution=4096), ValueError, "resolution"),
     (dict(frame_buffer="yes"), TypeError, "frame_buffer"),
+    (dict(unplaced="warn"), ValueError, "unplaced"),
 ])
 def test_bad_parameters(device, kw, error, match):
     with pytest.raises(error, match=match):

@@ -9,6 +9,7 @@ from shadowcl import voxelize as vz
 from shadowcl.geometry import Mesh
 from shadowcl.reference import voxelize as ref
 from shadowcl.subdivision import SubdivisionSurface
+from shadowcl.testing import grid_patch_table
 
 from conftest import require_models
 
@@ -72,20 +73,20 @@ def compare_with_reference(device, table, resolution, connectivity):
 @pytest.mark.parametrize("resolution", [1, 2, 31, 32, 33])
 @pytest.mark.parametrize("connectivity", [26, 18, 6])
 def test_torus_matches_reference(device, resolution, connectivity):
-    table = vz.grid_patch_table(torus_net(), True, True)
+    table = grid_patch_table(torus_net(), True, True)
     vox, r = compare_with_reference(device, table, resolution, connectivity)
     assert vox.nleaves >= len(table.first)
 
 
 @pytest.mark.parametrize("connectivity", [26, 6])
 def test_random_surface_matches_reference(device, rng, connectivity):
-    table = vz.grid_patch_table(bumpy_ground(rng))
+    table = grid_patch_table(bumpy_ground(rng))
     compare_with_reference(device, table, 40, connectivity)
 
 
 def test_far_from_origin_matches_reference(device):
     """The whole torus translated 1000 units away (float32 control points lose ~6e-5 there)."""
-    table = vz.grid_patch_table(torus_net(shift=1000.0), True, True)
+    table = grid_patch_table(torus_net(shift=1000.0), True, True)
     vox, _ = compare_with_reference(device, table, 32, 26)
     assert np.allclose(vox.origin, 1000.0 + np.array([-1.4, -1.4, -1.4]) - 0.0, atol=0.3)
 
@@ -122,7 +123,7 @@ SEPARATES = {26: 6, 18: 6, 6: 18}
 @pytest.mark.parametrize("connectivity", [26, 18, 6])
 @pytest.mark.parametrize("resolution", [24, 47])
 def test_closed_surfaces_do_not_leak(device, connectivity, resolution):
-    torus = vz.voxelize(device, vz.grid_patch_table(torus_net(), True, True), resolution, connectivity)
+    torus = vz.voxelize(device, grid_patch_table(torus_net(), True, True), resolution, connectivity)
     assert reaches(torus, torus_core(), SEPARATES[connectivity]) == 0
     cube = vz.voxelize(device, SubdivisionSurface.load(require_models() / "ccss" / "catmark_cube.obj"), resolution,
                        connectivity)
@@ -131,7 +132,7 @@ def test_closed_surfaces_do_not_leak(device, connectivity, resolution):
 
 def test_flood_fill_detects_a_hole(device):
     """The leak test can fail: removing the voxels around a surface point opens the torus."""
-    torus = vz.voxelize(device, vz.grid_patch_table(torus_net(), True, True), 24, 26)
+    torus = vz.voxelize(device, grid_patch_table(torus_net(), True, True), 24, 26)
     occupied = torus.occupied
     core, _ = torus.voxel_of(torus_core())
     assert outside_reaches(occupied, core, 6) == 0
@@ -142,7 +143,7 @@ def test_flood_fill_detects_a_hole(device):
 
 @pytest.mark.parametrize("connectivity", [26, 6])
 def test_voxels_are_near_the_surface_and_cover_it(device, rng, connectivity):
-    table = vz.grid_patch_table(torus_net(), True, True)
+    table = grid_patch_table(torus_net(), True, True)
     vox = vz.voxelize(device, table, 40, connectivity)
     h = vox.voxel_size
     # Dense float64 samples of the limit surface (spacing well below a voxel)
@@ -178,7 +179,7 @@ def test_voxels_are_near_the_surface_and_cover_it(device, rng, connectivity):
 
 
 def test_overflow_regrows_to_the_same_result(device):
-    table = vz.grid_patch_table(torus_net(), True, True)
+    table = grid_patch_table(torus_net(), True, True)
     normal = vz.voxelize(device, table, 32, 26)
     tiny = vz.voxelize(device, table, 32, 26, initial_capacity=8)
     assert tiny.stats["reruns"] > 0
@@ -186,8 +187,23 @@ def test_overflow_regrows_to_the_same_result(device):
     assert np.array_equal(tiny.occupied, normal.occupied)
 
 
+def test_counters_that_could_wrap_are_refused(device, monkeypatch):
+    """A level whose slot counters could pass the 32-bit limit is refused with a ValueError naming the
+    resolution before the kernel runs (a wrapped counter would index below the buffers); here the limit is
+    lowered to what the torus's deeper levels need, and a limit it fits in changes nothing."""
+    table = grid_patch_table(torus_net(), True, True)
+    normal = vz.voxelize(device, table, 32, 26)
+    level_items = max(n for _, n, _ in normal.stats["per_level"])
+    monkeypatch.setattr(vz, "COUNTER_MAX", 4 * level_items - 1)
+    with pytest.raises(ValueError, match="resolution: 32 needs .* subpatches .* 32-bit counters"):
+        vz.voxelize(device, table, 32, 26)
+    monkeypatch.setattr(vz, "COUNTER_MAX", 4 * level_items + normal.stats["leaves"])
+    fits = vz.voxelize(device, table, 32, 26, initial_capacity=8)
+    assert np.array_equal(fits.occupied, normal.occupied)
+
+
 def test_without_frame_buffer_same_voxels(device):
-    table = vz.grid_patch_table(torus_net(), True, True)
+    table = grid_patch_table(torus_net(), True, True)
     with_fb = vz.voxelize(device, table, 32, 18, frame_buffer=True)
     without = vz.voxelize(device, table, 32, 18, frame_buffer=False)
     assert without.frame_dev is None and without.stats["frame_bytes"] == 0
@@ -200,7 +216,7 @@ def test_frame_buffer_too_large(device, monkeypatch):
     monkeypatch.setattr(type(device), "max_alloc_bytes", property(lambda self: 64 << 20))
     x, y = np.meshgrid(np.arange(4.0), np.arange(4.0), indexing="ij")
     net = 0.001 * np.stack([x, y, 0 * x], axis=-1)
-    table = vz.merge_tables([vz.grid_patch_table(net), vz.grid_patch_table(net + 1.0)])
+    table = vz.merge_tables([grid_patch_table(net), grid_patch_table(net + 1.0)])
     with pytest.raises(ValueError, match="frame buffer"):
         vz.voxelize(device, table, 1024, 26, frame_buffer=True)
     fallback = vz.voxelize(device, table, 1024, 26, frame_buffer=None)
@@ -209,8 +225,8 @@ def test_frame_buffer_too_large(device, monkeypatch):
 
 
 def test_merge_tables_keeps_every_patch(device):
-    a = vz.grid_patch_table(torus_net(), True, True)
-    b = vz.grid_patch_table(torus_net(shift=3.0), True, True)
+    a = grid_patch_table(torus_net(), True, True)
+    b = grid_patch_table(torus_net(shift=3.0), True, True)
     merged = vz.merge_tables([a, b])
     assert len(merged.first) == len(a.first) + len(b.first)
     assert np.array_equal(merged.neighbors[len(a.first):], b.neighbors + len(a.first))
@@ -219,7 +235,7 @@ def test_merge_tables_keeps_every_patch(device):
 
 
 def test_grid_bounds_fix_the_grid(device):
-    table = vz.grid_patch_table(torus_net(), True, True)
+    table = grid_patch_table(torus_net(), True, True)
     box = np.array([[-3.0, -2.0, -1.0], [5.0, 2.0, 1.0]])
     vox = vz.voxelize(device, table, 40, 26, grid_bounds=box)
     assert np.allclose(vox.origin, [-3.0, -4.0, -4.0], atol=1e-3) and np.isclose(vox.voxel_size * 40, 8.0, rtol=1e-3)
@@ -255,11 +271,11 @@ def test_grid_bounds_need_only_hold_the_control_vertices(device, rng):
     (lambda d, t: vz.voxelize(d, "torus", 16), TypeError, "surface"),
     (lambda d, t: vz.voxelize(d, vz.Patches(t.points * np.nan, t.first, t.levels, t.neighbors), 16), ValueError, "finite"),
     (lambda d, t: vz.voxelize(d, vz.Patches(t.points[:10], t.first, t.levels, t.neighbors), 16), ValueError, "beyond"),
-    (lambda d, t: vz.grid_patch_table(np.zeros((3, 5, 3))), ValueError, "net"),
+    (lambda d, t: grid_patch_table(np.zeros((3, 5, 3))), ValueError, "net"),
 ])
 def test_bad_input(device, call, error, match):
     with pytest.raises(error, match=match):
-        call(device, vz.grid_patch_table(torus_net(), True, True))
+        call(device, grid_patch_table(torus_net(), True, True))
 
 
 def oriented_edges(mesh):
@@ -283,7 +299,7 @@ def test_leaf_mesh_is_crack_free(device, shape, euler, resolution):
     triangles per leaf alone leave T-junction cracks. The pyramid's table has patches of two sizes (a
     side of one is half a side of its neighbour)."""
     if shape == "torus":
-        table = vz.grid_patch_table(torus_net(), True, True)
+        table = grid_patch_table(torus_net(), True, True)
     else:
         table = SubdivisionSurface.load(require_models() / "ccss" / f"{shape}.obj").patch_table(device)
     vox = vz.voxelize(device, table, resolution)
@@ -362,7 +378,7 @@ def test_open_surface_boundary_is_the_table_boundary(device):
 
 def test_leaves_come_out_in_the_same_order_every_run(device):
     """Leaves are appended by atomics in any order; the voxelizer sorts them so runs are reproducible."""
-    table = vz.grid_patch_table(torus_net(), True, True)
+    table = grid_patch_table(torus_net(), True, True)
     first, second = vz.voxelize(device, table, 48, 26), vz.voxelize(device, table, 48, 26)
     assert len(first.leaves) > 1000
     np.testing.assert_array_equal(first.leaves, second.leaves)

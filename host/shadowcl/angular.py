@@ -66,7 +66,14 @@ Pipeline (kernels/angular.cl):
    slower to build (1.33 s against 0.44 s at 100 000 cubes: the loops are chained on the host), though
    faster to look up (0.060 s against 0.095 s for 500 000 receivers; a table 3.8 x smaller). Exact depth
    from face planes also holds on every mesh without the chord's assumptions (no layered folds of one
-   lit region, a cap convex between creases).
+   lit region, a cap convex between creases). But a face record is the face's cut by the row's *centre*:
+   a receiver lying on a closed occluder's lit cap, up to half a row off it, meets the plane of a
+   neighbouring face extended past its edge, above a convex cap, and is falsely shadowed
+   (bench/results/angular_caps.md: 12-21 % of such receivers on a sphere, torus or cylinder under a
+   directional light, 0.25-7 % with the loop table, whose chord lies below the cap). Requiring the ray to
+   cross the listed face removes those (0 on the sphere) but turns the listings a row's centre misses
+   into false lights in the shadow (ground receivers: 9 -> 55-110 of 1,500): that needs spans over the
+   whole row, not done.
 4. **Lookups**: per receiver, its row and ``s``; a binary search finds the records starting at or
    before ``s``, a backward scan tests them (first hit wins) and stops where the row's running maximum
    of ``s_hi`` falls below ``s`` (section 7 step 2, without walking the whole entry). ``classify_view``
@@ -112,7 +119,9 @@ from .geometry import Mesh
 from .lights import PointLight
 from .methods import Method, check_prepare
 from .points import check_points
+from .lightspace import box_corners, orthonormal_basis
 from .silhouette import edge_adjacency, silhouette_edges, silhouette_loops
+from .topology import components, concave_edges
 
 REC_FLOATS = 8                 # kernels/angular.cl: REC
 MIN_ROWS, MAX_ROWS = 16, 1 << 16
@@ -165,7 +174,9 @@ def check_even_count(sil) -> None:
 @dataclass(frozen=True)
 class Frame:
     """World -> angular frame: ``local = rotation @ (world - origin)``; the light at the origin for a
-    point light; rows over ``[t0, t0 + rows * dt)``; ``full_circle`` rows wrap round."""
+    point light; rows over ``[t0, t0 + rows * dt)``; ``full_circle`` rows wrap round. ``centre`` (world)
+    is the occluders' box centre: the kernels hold receivers and face planes relative to it
+    (:attr:`anchor`), so that a distant point light costs the depth test no precision."""
 
     origin: np.ndarray
     rotation: np.ndarray
@@ -174,6 +185,13 @@ class Frame:
     dt: float
     rows: int
     full_circle: bool
+    centre: np.ndarray
+
+    @property
+    def anchor(self) -> np.ndarray:
+        """(3,) frame coordinates of :attr:`centre`, rounded to float32: the kernels get it as floats, and
+        host and kernels must subtract the very same point."""
+        return self.to_local(self.centre[None])[0].astype(np.float32).astype(np.float64)
 
     def to_local(self, world: np.ndarray) -> np.ndarray:
         """(N, 3) float64 frame coordinates of world positions."""
@@ -220,23 +238,16 @@ def angular_frame(light, occluder_points: np.ndarray, prefer_x=None) -> tuple[np
         if np.linalg.norm(px) > 1e-9 and (not point or _pole_clearance(px / np.linalg.norm(px), d) >= POLE_CLEARANCE):
             x_axis = px / np.linalg.norm(px)
     if x_axis is None:
-        basis = _orthonormal_basis(z_axis)
+        basis = np.stack(orthonormal_basis(z_axis))
         x_axis = basis[0]
         if point and len(d):
             proj = d @ basis[:2].T                                   # components in the plane orthogonal to z
             x_axis = np.linalg.eigh(proj.T @ proj)[1][:, 0] @ basis[:2]   # least spread: farthest from them
     if point:                                                        # -Z: the mean direction, orthogonal to X
         z_axis = z_axis - (z_axis @ x_axis) * x_axis
-        z_axis = z_axis / np.linalg.norm(z_axis) if np.linalg.norm(z_axis) > 1e-9 else _orthonormal_basis(x_axis)[0]
+        z_axis = z_axis / np.linalg.norm(z_axis) if np.linalg.norm(z_axis) > 1e-9 else orthonormal_basis(x_axis)[0]
     y_axis = np.cross(z_axis, x_axis)
     return origin, np.stack([x_axis, y_axis, z_axis])
-
-
-def _orthonormal_basis(z: np.ndarray) -> np.ndarray:
-    helper = np.array([1.0, 0, 0]) if abs(z[0]) < 0.9 else np.array([0, 1.0, 0])
-    x = np.cross(helper, z)
-    x /= np.linalg.norm(x)
-    return np.stack([x, np.cross(z, x), z])
 
 
 def row_coordinate(local: np.ndarray, point: bool) -> np.ndarray:
@@ -304,6 +315,8 @@ def build_table(device, local_vertices: np.ndarray, faces: np.ndarray, table_fac
     rows = frame.rows
     options = frame_options(frame)
     vertices_g = dev.to_device(np.ascontiguousarray(local_vertices, dtype=np.float32))
+    relative_g = dev.to_device(np.ascontiguousarray(local_vertices - frame.anchor, dtype=np.float32))
+    anchor = tuple(np.float32(c) for c in frame.anchor)
     faces_g = dev.to_device(np.ascontiguousarray(faces, dtype=np.int32))
     ids_g = dev.to_device(np.ascontiguousarray(table_faces, dtype=np.int32))
     planes_g = dev.empty(16 * max(n, 1), "face planes")
@@ -311,8 +324,8 @@ def build_table(device, local_vertices: np.ndarray, faces: np.ndarray, table_fac
     nrows_g = dev.empty(4 * max(n, 1), "face row counts")
     scalars = (np.int32(n), np.float32(frame.t0), np.float32(frame.dt), np.int32(rows))
     if n:
-        dev.kernel("angular.cl", "face_rows", options)(queue, (n,), None, vertices_g, faces_g, ids_g, *scalars,
-                                                       planes_g, first_g, nrows_g)
+        dev.kernel("angular.cl", "face_rows", options)(queue, (n,), None, vertices_g, relative_g, faces_g, ids_g,
+                                                       *scalars, *anchor, planes_g, first_g, nrows_g)
     counts = row_counts(dev.from_device(first_g, n, np.int32), dev.from_device(nrows_g, n, np.int32), rows)
     pairs = None if loops is None else loop_pairs(dev, vertices_g, loops, frame, stats)
     npairs = np.zeros(rows, dtype=np.int64) if pairs is None else pairs[2]
@@ -335,7 +348,7 @@ def build_table(device, local_vertices: np.ndarray, faces: np.ndarray, table_fac
         if n:
             dev.kernel("angular.cl", "fill_rows", options)(queue, (n,), None, vertices_g, faces_g, ids_g, *scalars,
                                                            planes_g, first_g, nrows_g, offsets_g, cursor_g, records_g)
-        queue.finish()
+        check_rows_filled(dev, cursor_g, offsets, "fill_rows")
         t2 = time.perf_counter()
         dev.kernel("angular.cl", "sort_rows", options)(queue, (rows,), None, offsets_g, np.int32(rows), records_g)
     queue.finish()
@@ -390,6 +403,7 @@ def loop_pairs(device, vertices_g, loops, frame: Frame, stats: dict):
             dev.kernel("angular.cl", "fill_edges", options)(
                 queue, (ne,), None, vertices_g, tails_g, heads_g, dev.to_device(group), np.int32(ne), np.int32(nridge),
                 *scalars[1:], first_g, count_g, offsets_g, cursor_g, cross_g)
+        check_rows_filled(dev, cursor_g, offsets, "fill_edges")
     queue.finish()
     t_pair = time.perf_counter()
     while True:
@@ -399,7 +413,8 @@ def loop_pairs(device, vertices_g, loops, frame: Frame, stats: dict):
         if crossings:
             dev.kernel("angular.cl", "pair_rows", options)(
                 queue, (rows,), None, offsets_g, np.int32(rows), np.float32(frame.t0), np.float32(frame.dt),
-                vertices_g, tails_g, heads_g, np.int32(cap), cross_g, queue_g, pairs_g, npairs_g, overflow_g)
+                vertices_g, tails_g, heads_g, np.int32(cap), *(np.float32(c) for c in frame.anchor), cross_g, queue_g,
+                pairs_g, npairs_g, overflow_g)
         if dev.from_device(overflow_g, 1, np.int32)[0] == 0:
             break
         cap *= 2
@@ -413,15 +428,9 @@ def loop_pairs(device, vertices_g, loops, frame: Frame, stats: dict):
 def lit_regions(adjacency, facing: np.ndarray) -> np.ndarray:
     """(F,) int: connected regions of light-facing faces (joined across edges with both faces facing the
     light), -1 for the others. The loops bounding one region (an outer loop and its holes) pair together."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
     pairs = adjacency.edge_faces[adjacency.face_count == 2]
     both = facing[pairs[:, 0]] & facing[pairs[:, 1]]
-    nfaces = len(facing)
-    graph = coo_matrix((np.ones(int(both.sum())), (pairs[both, 0], pairs[both, 1])), shape=(nfaces, nfaces))
-    label = connected_components(graph, directed=False)[1]
-    return np.where(facing, label, -1)
+    return np.where(facing, components(len(facing), pairs[both]), -1)
 
 
 def edge_regions(adjacency, facing: np.ndarray, edges: np.ndarray, regions: np.ndarray) -> np.ndarray:
@@ -432,23 +441,12 @@ def edge_regions(adjacency, facing: np.ndarray, edges: np.ndarray, regions: np.n
 
 
 def concave_creases(adjacency, facing: np.ndarray) -> np.ndarray:
-    """Edges between two light-facing faces where the surface folds inwards (the far corner of one face
-    lies on the outer side of the other's plane): a valley seen from the light, which a chord between the
-    loop's crossings would cut off. Section 5 inserts such edges in duplicate for depth; the convex ones
-    lie in front of the chord and need none."""
-    two = adjacency.face_count == 2
-    ids = np.flatnonzero(two)
+    """Concave edges (:func:`shadowcl.topology.concave_edges`) between two light-facing faces: a valley
+    seen from the light, which a chord between the loop's crossings would cut off. Section 5 inserts such
+    edges in duplicate for depth; the convex ones lie in front of the chord and need none."""
+    ids = np.flatnonzero(adjacency.face_count == 2)
     f = adjacency.edge_faces[ids]
-    ids, f = ids[facing[f[:, 0]] & facing[f[:, 1]]], f[facing[f[:, 0]] & facing[f[:, 1]]]
-    v = np.asarray(adjacency.vertices, dtype=np.float64)
-    tri = v[adjacency.faces[f[:, 0]]]
-    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    other = adjacency.faces[f[:, 1]]
-    ends = adjacency.edges[ids]
-    far = other.sum(axis=1) - ends.sum(axis=1)                     # the corner of face 2 off the edge
-    out = v[far] - v[ends[:, 0]]
-    rise = np.einsum("ij,ij->i", normal, out)
-    return ids[rise > 1e-6 * np.linalg.norm(normal, axis=1) * np.linalg.norm(out, axis=1)]
+    return concave_edges(adjacency, ids[facing[f[:, 0]] & facing[f[:, 1]]])
 
 
 def pole_hits(adjacency, facing: np.ndarray, regions: np.ndarray, local) -> tuple[np.ndarray, np.ndarray]:
@@ -478,6 +476,19 @@ def check_capacity(device, entries: int, rows: int, what: str) -> None:
                          f"the device holds in one buffer ({device.max_alloc_bytes >> 20} MiB); use fewer rows")
 
 
+def check_rows_filled(device, cursor_g, offsets: np.ndarray, kernel: str) -> None:
+    """Raise ``RuntimeError`` when a fill kernel's row cursors (``cursor_g``, (rows,) slots taken) went past
+    their rows' slots (``offsets``, (rows + 1,)): the kernel dropped those writes, so the table would be
+    silently short. The counts come from the same per-item row ranges, so this is a bug, not a size to grow."""
+    rows = len(offsets) - 1
+    taken = device.from_device(cursor_g, rows, np.int32).astype(np.int64)
+    over = np.flatnonzero(taken > np.diff(offsets))
+    if len(over):
+        k = int(over[0])
+        raise RuntimeError(f"angular {kernel}: {len(over)} rows got more records than counted, first row {k} "
+                           f"({taken[k]} for {int(offsets[k + 1] - offsets[k])} slots); writes past them were dropped")
+
+
 def row_counts(first: np.ndarray, count: np.ndarray, rows: int) -> np.ndarray:
     """(rows,) records per row from each face's first row (unwrapped) and row count, by a difference array:
     per-row atomic counters on the device serialised on ~600 addresses (0.45 s for 600 k faces)."""
@@ -504,29 +515,10 @@ def table_entries(device, table: Table) -> dict:
     offsets = device.from_device(table.offsets, rows + 1, np.int32)
     rec = device.from_device(table.records, (max(table.entries, 1), REC_FLOATS), np.float32)[:table.entries]
     ident = rec[:, 6].view(np.int32)
+    plane = rec[:, 2:6].astype(np.float64)
+    plane[:, 3] += plane[:, :3] @ table.frame.anchor          # the kernels' offsets are relative to the anchor
     return dict(offsets=offsets, row=np.repeat(np.arange(rows), np.diff(offsets)), face=ident,
-                region=np.where(ident < 0, -ident - 1, -1), s_lo=rec[:, 0], s_hi=rec[:, 1], plane=rec[:, 2:6])
-
-
-def closed_faces(adjacency) -> tuple[np.ndarray, np.ndarray]:
-    """((F,) bool, (F,) int): faces of connected components (faces joined by shared edges) that are closed
-    manifolds, consistently wound, and each face's component label. In a closed component a blocked ray
-    always crosses a light-facing face, so only those enter the table; the other components' faces all
-    enter (a hidden face of an open mesh can stop a ray)."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    nfaces = len(adjacency.faces)
-    owner = np.repeat(np.arange(len(adjacency.edges)), adjacency.face_count)   # edge of each CSR face item
-    first = adjacency.face_items[adjacency.face_offsets[:-1]][owner]           # join every face to its edge's first
-    graph = coo_matrix((np.ones(len(owner)), (first, adjacency.face_items)), shape=(nfaces, nfaces))
-    _, label = connected_components(graph, directed=False)
-    bad = np.ones(len(adjacency.edges), dtype=bool)
-    bad[adjacency.face_count == 2] = False
-    bad[adjacency.misoriented_edges] = True
-    open_label = np.zeros(label.max(initial=-1) + 1, dtype=bool)
-    open_label[label[adjacency.face_items[np.isin(owner, np.flatnonzero(bad))]]] = True
-    return ~open_label[label], label
+                region=np.where(ident < 0, -ident - 1, -1), s_lo=rec[:, 0], s_hi=rec[:, 1], plane=plane)
 
 
 # Method ----------------------------------------------------------------------------------------------------
@@ -540,6 +532,7 @@ class AngularMethod(Method):
     """
 
     name = "angular"
+    min_light_clearance = 1e-5      # measured (bench/range.py): right from 1e-7 off a surface, not on it
     image_space = True
     parameters = {
         "theta_resolution": (None, "rows of the table (theta steps; Y steps for a directional light); None picks "
@@ -590,9 +583,9 @@ class AngularMethod(Method):
         point = isinstance(light, PointLight)
         adjacency = edge_adjacency(mesh)
         sil = silhouette_edges(self.device, adjacency, light)
-        closed, label = closed_faces(adjacency)
-        if point:
-            light_inside(mesh, light, closed, label)
+        closed = adjacency.closed_faces     # in a closed component a blocked ray always crosses a light-facing
+        if point:                           # face, so only those enter the table; elsewhere every face does
+            light_inside(adjacency, light)
         keep = np.where(closed, sil.facing, True)
         keep[adjacency.collapsed_faces] = False
         table_faces = np.flatnonzero(keep)
@@ -622,13 +615,14 @@ class AngularMethod(Method):
         elif self.theta_resolution is not None:
             rows = self.theta_resolution
         else:
-            far_pts = _box_corners(box)
+            far_pts = box_corners(box)
             far = float(np.linalg.norm(far_pts - light.position, axis=1).max()) if point else 0.0
             rows = rows_from_receivers(span, far, box, self.expected_receivers, point)
         if not full:                                   # pad half a row each side: extreme corners get a centre
             pad = 0.5 * span / rows
             lo, hi = lo - pad, hi + pad
-        frame = Frame(origin, rotation, point, lo, (hi - lo) / rows, rows, full)
+        centre = 0.5 * (mesh.vertices[used].min(axis=0) + mesh.vertices[used].max(axis=0)) if len(used) else origin
+        frame = Frame(origin, rotation, point, lo, (hi - lo) / rows, rows, full, np.asarray(centre, dtype=np.float64))
         loops = None
         if self.table_kind == "loops":
             # closed components by their loops (the row range above already covers them); open or
@@ -683,11 +677,12 @@ class AngularMethod(Method):
             pts, nrm = points, normals
         else:
             rot, origin, dtype = frame.rotation, np.zeros(3), np.float32
-            pts = frame.to_local(points)
+            pts = frame.to_local(points) - frame.anchor
             nrm = None if normals is None else receivers.unit_normals() @ rot.T
         pts_g = dev.to_device(np.ascontiguousarray(pts, dtype=dtype))
         nrm_g = pts_g if nrm is None else dev.to_device(np.ascontiguousarray(nrm, dtype=dtype))
-        args = (pts_g, nrm_g, dev.to_device(np.ascontiguousarray(rot, dtype=dtype)), *(dtype(c) for c in origin))
+        args = (pts_g, nrm_g, dev.to_device(np.ascontiguousarray(rot, dtype=dtype)), *(dtype(c) for c in origin),
+                *(np.float32(c) for c in frame.anchor))
         return len(points), args, frame_options(frame, normals is not None) + (f"-DINPUT_F64={int(self._fp64)}",)
 
     def _common_args(self):
@@ -742,7 +737,8 @@ class AngularMethod(Method):
             return frame.rows
         if not _same_axis(prefer_x, self.prefer_x):
             _, rotation = angular_frame(self.light, self.mesh.vertices[self._sample], prefer_x)
-            frame = Frame(frame.origin, rotation, frame.point, frame.t0, frame.dt, frame.rows, frame.full_circle)
+            frame = Frame(frame.origin, rotation, frame.point, frame.t0, frame.dt, frame.rows, frame.full_circle,
+                          frame.centre)
         t = np.full(view.height * view.width, np.nan)
         t[seen.pixel_index] = row_coordinate(frame.to_local(seen.points), frame.point)
         step = np.abs(np.diff(t.reshape(view.height, view.width), axis=0))
@@ -783,39 +779,19 @@ class AngularMethod(Method):
         return table_entries(self.device, self.table)
 
 
-def light_inside(mesh: Mesh, light, closed: np.ndarray, label: np.ndarray) -> None:
-    """Raise ``ValueError`` when point ``light`` is inside a closed component (winding number of the
-    component round the light, by the solid angles of its faces, at least 1/2 in size). There no face
-    turns to the light (or all do, wound inwards), the table would be empty or the far wall's, and every
-    receiver would come out lit; the shadow is everything outside the solid, not what this method models.
-    Only components whose bounding box holds the light are summed (1.1 s for 1.2 M faces otherwise)."""
-    if not isinstance(light, PointLight) or not closed.any():
+def light_inside(adjacency, light) -> None:
+    """Raise ``ValueError`` when point ``light`` is inside a closed component of the mesh of ``adjacency``
+    (:meth:`shadowcl.topology.EdgeAdjacency.enclosing_faces`). There no face turns to the light (or all do,
+    wound inwards), the table would be empty or the far wall's, and every receiver would come out lit; the
+    shadow is everything outside the solid, not what this method models."""
+    if not isinstance(light, PointLight):
         return
-    ids = np.flatnonzero(closed)
-    vertex_label = np.full(len(mesh.vertices), -1, dtype=np.int64)
-    vertex_label[mesh.faces[ids]] = label[ids, None]
-    used = vertex_label >= 0
-    vl, side = vertex_label[used], mesh.vertices[used] < light.position
-    # the box holds the light when the component has vertices on both sides of it along every axis
-    n = int(label.max()) + 1
-    holds = np.ones(n, dtype=bool)
-    for axis in range(3):
-        below = np.bincount(vl, weights=side[:, axis], minlength=n)
-        holds &= (below > 0) & (below < np.bincount(vl, minlength=n))
-    for c in np.flatnonzero(holds):
-        part = ids[label[ids] == c]
-        v = mesh.vertices[mesh.faces[part]].astype(np.float64) - light.position
-        a, b, d = v[:, 0], v[:, 1], v[:, 2]
-        la, lb, ld = (np.linalg.norm(x, axis=1) for x in (a, b, d))
-        det = np.einsum("ij,ij->i", a, np.cross(b, d))
-        den = la * lb * ld + np.einsum("ij,ij->i", a, b) * ld + np.einsum("ij,ij->i", a, d) * lb \
-            + np.einsum("ij,ij->i", b, d) * la
-        winding = 2 * np.arctan2(det, den).sum() / (4 * np.pi)      # signed solid angles (Van Oosterom & Strackee)
-        if abs(winding) > 0.5:
-            raise ValueError(f"light: the point light at {light.position.tolist()} is inside a closed solid "
-                             f"({len(part)} faces); everything outside that solid is in its shadow, which "
-                             "the angular table cannot represent (no face of it turns to the light): move the "
-                             "light out or open the mesh")
+    enclosing = adjacency.enclosing_faces(light.position)
+    if len(enclosing):
+        raise ValueError(f"light: the point light is inside a closed solid "   # (its position here is the frame's)
+                         f"({len(enclosing)} faces); everything outside that solid is in its shadow, which "
+                         "the angular table cannot represent (no face of it turns to the light): move the "
+                         "light out or open the mesh")
 
 
 def _same_axis(a, b) -> bool:
@@ -834,8 +810,3 @@ def _unit_directions(light, points: np.ndarray) -> np.ndarray:
     d = np.asarray(points, dtype=np.float64) - light.position
     length = np.linalg.norm(d, axis=1)
     return d[length > 0] / length[length > 0, None]
-
-
-def _box_corners(box: np.ndarray) -> np.ndarray:
-    return np.array([[box[i][0], box[j][1], box[k][2]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
-

@@ -104,15 +104,19 @@ def _default_device() -> cl.Device:
     devices = [device for _, _, device in list_devices()]
     if not devices:
         raise RuntimeError(NO_PLATFORM_MESSAGE)
-    cpus = [device for device in devices if device.type & cl.device_type.CPU]
-    return (cpus or devices)[0]
+    # A GPU when there is one (the kernels are written to run there too), else a CPU (PoCL), else any
+    for kind in (cl.device_type.GPU, cl.device_type.CPU):
+        of_kind = [device for device in devices if device.type & kind]
+        if of_kind:
+            return of_kind[0]
+    return devices[0]
 
 
 class Device:
     """One OpenCL device with its context, in-order queue, and built programs.
 
     ``Device()`` picks, in order: ``SHADOWCL_DEVICE`` or ``PYOPENCL_CTX`` (``"P:D"`` indices or a
-    name substring), else the first CPU device, else any device. ``Device("pthread")`` or
+    name substring), else the first GPU, else the first CPU device, else any device. ``Device("pthread")`` or
     ``Device(cl_device)`` picks explicitly. ``kernel_dir`` replaces the shipped kernels folder (tests).
     Kernel objects are shared and carry their arguments, so use one Device from one thread at a time
     (builds are locked; launches are not).

@@ -147,6 +147,7 @@ class ExactMethod(Method):
     """
 
     name = "exact"
+    point_light_reach = 2.0 ** 14   # measured (bench/range.py): list cells misbin from ~1e5 sizes
     parameters = {
         "resolution": (None, "cells on the longer side of each light view; None picks the grid from the "
                              "triangle count and expected_receivers"),

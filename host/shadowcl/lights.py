@@ -30,12 +30,22 @@ class DirectionalLight:
     direction: np.ndarray
 
     def __init__(self, direction):
-        d = vector3("direction", direction, nonzero=True)
-        object.__setattr__(self, "direction", d / np.linalg.norm(d))
+        object.__setattr__(self, "direction", unit_vector("direction", direction))
 
     def direction_to_light(self, points: np.ndarray) -> np.ndarray:
         """(N, 3) unit vectors from ``points`` towards the light (the same for every point)."""
         return np.broadcast_to(-self.direction, np.shape(points)).copy()
+
+
+def unit_vector(name: str, value) -> np.ndarray:
+    """``value`` (finite, non-zero) as a float64 unit vector, scaled by its largest component first so
+    that neither huge (1e200) nor tiny (1e-200) components overflow or underflow the length."""
+    v = vector3(name, value)
+    largest = np.abs(v).max()
+    if largest == 0:
+        raise ValueError(f"{name}: must have non-zero length, got {v.tolist()}")
+    v = v / largest
+    return v / np.linalg.norm(v)
 
 
 Light = PointLight | DirectionalLight

@@ -45,6 +45,7 @@ from .geometry import Mesh
 from .lights import PointLight, check_light
 from .metrics import MaskError, mask_error
 from .points import check_points
+from .topology import components
 
 # 1 is the mesh itself. 0.5 and 0.1 are Table I's reductions (teapot 6,320 -> 3,160; bunny 69,451 ->
 # 6,945); the steps between at most halve the triangles, so "auto" is never forced more than ~2x finer
@@ -85,14 +86,10 @@ def _weld(mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _components(faces: np.ndarray, n_vertices: int) -> np.ndarray:
-    """(F,) label of each face's connected component (faces joined through shared vertices)."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    rows = np.repeat(np.arange(len(faces)), 3)
-    incidence = coo_matrix((np.ones(rows.size), (faces.reshape(-1), rows)), shape=(n_vertices, len(faces)))
-    _, labels = connected_components(incidence @ incidence.T, directed=False)
-    return labels[faces[:, 0]]
+    """(F,) label of each face's connected component (faces joined through shared vertices): the graph
+    of vertices and faces (nodes V + f), so labels follow each component's least vertex."""
+    rows = n_vertices + np.repeat(np.arange(len(faces)), 3)
+    return components(n_vertices + len(faces), np.stack([faces.reshape(-1), rows], axis=1))[faces[:, 0]]
 
 
 def _compact(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

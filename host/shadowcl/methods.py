@@ -29,6 +29,11 @@ Optional capabilities are declared on the class, never found by ``hasattr``:
 - ``own_renderer``: the method draws its own geometry (:meth:`Method.render_frame`).
 - ``bounded``: ``classify`` is right only inside the ``receiver_bounds`` given to ``prepare`` (a single
   shadow-map view); :class:`shadowcl.Shadows` then answers points outside by a second preparation.
+- ``point_light_reach``: how many scene sizes away the method's float32 arithmetic still answers a
+  point light right (measured, bench/range.py); :class:`shadowcl.Shadows` gives a point light
+  farther than that the method as the directional light from the scene (:mod:`shadowcl.frame`).
+- ``min_light_clearance``: the closest a point light may come to an occluding triangle, as a fraction
+  of the occluders' box diagonal (measured there too); a closer light is refused.
 - ``eps_meaning``: how the method honours ``eps``, or None when it cannot (its own resolution sets the
   offset): the public calls then refuse an ``eps`` other than None (:func:`resolve_eps`), and
   :func:`methods` lists it as the method's ``eps`` entry.
@@ -68,6 +73,8 @@ class Method(abc.ABC):
     image_space = False
     own_renderer = False
     bounded = False
+    point_light_reach = 2.0 ** 24     # shadowcl.frame.DIRECTIONAL_DISTANCE: float32's own limit
+    min_light_clearance = 0.0
     eps_meaning: str | None = "as DESIGN.md: the segment starts eps along the normal and ignores hits within eps"
 
     def __init__(self, device, **params):

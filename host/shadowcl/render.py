@@ -173,13 +173,12 @@ class Renderer:
             shadow = np.zeros((len(lights), len(points)), dtype=bool)
             visibility = np.ones(shadow.shape, dtype=np.float32)
             for index, slot in enumerate(slots):
-                instance = slot._instance
                 with stage("classify"):
-                    if instance.image_space:
-                        shadow[index] = instance.classify_view(view, zbuffer, seen)
+                    if self.method_class.image_space:
+                        shadow[index] = slot.classify_view(view, zbuffer, seen)
                         visibility[index] = ~shadow[index]
                     else:     # binary methods give 0 or 1, so the threshold is their own mask
-                        visibility[index] = instance.visibility(points)
+                        visibility[index] = slot.visibility(points)
                         shadow[index] = visibility[index] < 0.5
             with stage("shading"):
                 if self.post_filter:

@@ -163,6 +163,7 @@ class ShadowMapMethod(Method):
     points beyond them from maps fitted to them); :meth:`visibility` is the filtered answer."""
 
     name = "shadow_map"
+    point_light_reach = 2.0 ** 21   # measured (bench/range.py): right to 3e6 scene sizes, 2 of 1,500 wrong at 1e7
     bounded = True
     parameters = {
         "resolution": (None, f"texels per side of each (square) depth map; None picks {DEFAULT_RESOLUTION}"),
@@ -215,7 +216,8 @@ class ShadowMapMethod(Method):
         fitted = lightspace.fit_views(light, receiver_bounds, origin, scale)
         _check_fits(self.device, resolution)
         corners = lightspace.box_corners(box - origin)
-        near = _cube_near(mesh, fitted.eye + origin, scale) if fitted.kind == "cube" else None
+        # the near plane floor scales with the occluders: far receivers must not clip a light's close surroundings
+        near = _cube_near(mesh, fitted.eye + origin, bounds_diagonal(mesh.bounds)) if fitted.kind == "cube" else None
         views = [_view(fitted, k, origin, corners, near, scale, resolution) for k in range(fitted.nviews)]
         to_light = fitted.eye if fitted.perspective else -np.asarray(light.direction, dtype=np.float64)
         records = np.stack([record for _, record in views])

@@ -33,7 +33,7 @@ number of faces crossed, whichever way they face. Closed components stay one-sid
 with the light outside a closed surface, the last face a segment crosses before the light faces the
 light. **A point light inside a closed component** breaks that (the last face crossed turns away: a
 light in a closed ball would cast no shadow at all), so when the light's winding number with respect
-to any closed component is nonzero (a float64 ray, :func:`ray_crossings`), every component is made
+to any closed component is nonzero (:meth:`shadowcl.topology.EdgeAdjacency.enclosing_faces`), every component is made
 two-sided for that frame (``stats["light_inside_closed"]``).
 
 **Non-manifold meshes** (an edge with three or more faces: fins, duplicated triangles, overlapping
@@ -95,21 +95,19 @@ from . import raster
 from .checks import check_bounds, choice, non_negative_float
 from .exact import ExactMethod
 from .geometry import Mesh, bounds_diagonal
+from .lightspace import box_corners
 from .lights import PointLight, check_light
 from .methods import Method, check_prepare
 from .points import check_points
 from .silhouette import (TRACKER_METHODS, Silhouette, SilhouetteTracker, edge_adjacency, face_facing,
                          silhouette_edges)
+from .topology import winding_number
 
 STENCILS = ("zfail", "zpass")
 EXTRUSION_MARGIN = 2.0   # the back cap is this many times farther than the farthest receiver (see module doc)
 FLOAT32_SAFE = 1e30      # far corners must stay well inside float32 range for the raster's clip space
 
-RAY_SEED, RAY_TRIES = 20261122, 8   # ray_crossings: seeded directions, redrawn while one grazes an edge
-EDGE_MARGIN = 1e-9       # ray_crossings: barycentric distance from an edge that counts as grazing it
-
 _TWO_SIDED: "weakref.WeakKeyDictionary[Mesh, dict]" = weakref.WeakKeyDictionary()
-_CLOSED_BOXES: "weakref.WeakKeyDictionary[Mesh, tuple]" = weakref.WeakKeyDictionary()   # _light_inside_closed
 
 
 @dataclass(frozen=True, eq=False)
@@ -119,13 +117,11 @@ class TwoSided:
     flipped copy (faces ``(v0, v2, v1)``, on vertices of its own appended after those) of every face of
     a connected component that has a border edge (of every component with ``everywhere``).
     ``open_faces``: original face indices of those components; ``detached_faces``: original face
-    indices of the detached faces; ``closed_component`` (F,): per original face the label of its closed
-    (one-sided) component, -1 for the faces of two-sided ones."""
+    indices of the detached faces."""
 
     mesh: Mesh
     open_faces: np.ndarray
     detached_faces: np.ndarray
-    closed_component: np.ndarray
 
 
 def two_sided(mesh: Mesh, everywhere: bool = False) -> TwoSided:
@@ -147,41 +143,15 @@ def two_sided(mesh: Mesh, everywhere: bool = False) -> TwoSided:
         faces[detached] = len(vertices) + np.arange(3 * len(detached)).reshape(-1, 3)
         vertices = np.concatenate([vertices, mesh.vertices[mesh.faces[detached].reshape(-1)]])
         adjacency = edge_adjacency(Mesh(vertices, faces))
-    nfaces = len(faces)
-    # Faces joined by two-face edges; a component with a border edge (one face) is open.
-    component = _components(nfaces, adjacency.edge_faces[adjacency.face_count == 2])
-    border_faces = adjacency.edge_faces[adjacency.face_count == 1, 0]
-    open_component = np.full(nfaces, everywhere)
-    open_component[component[border_faces]] = True
-    open_faces = np.flatnonzero(open_component[component])
-    closed_component = np.where(open_component[component], -1, component)
+    # Detached, every edge has one face or two wound opposite ways: open components are those with a border
+    open_faces = np.arange(len(faces)) if everywhere else np.flatnonzero(~adjacency.closed_faces)
     prepared = None                 # cached as None for a mesh used as it is: the cache must not keep its key alive
     if len(open_faces) or len(detached):
         used, local = np.unique(faces[open_faces], return_inverse=True)
         flipped = (local.reshape(-1, 3) + len(vertices))[:, [0, 2, 1]]   # v0 kept: its facing is -s exactly
         prepared = Mesh(np.concatenate([vertices, vertices[used]]), np.concatenate([faces, flipped]))
-    _TWO_SIDED[mesh][everywhere] = (prepared, open_faces, detached, closed_component)
-    return TwoSided(mesh if prepared is None else prepared, open_faces, detached, closed_component)
-
-
-def _components(n: int, pairs: np.ndarray) -> np.ndarray:
-    """Per node (of ``n``) the least node of its connected component, for undirected edges ``pairs``
-    (E, 2): roots hook onto the lesser root across each edge, then pointer jumping until every node
-    points at its root (pointers only decrease, so the forest never gets a cycle)."""
-    parent = np.arange(n)
-    while True:
-        a, b = parent[pairs[:, 0]], parent[pairs[:, 1]]
-        split = a != b
-        if not split.any():
-            return parent
-        low = np.minimum(a[split], b[split])
-        np.minimum.at(parent, a[split], low)
-        np.minimum.at(parent, b[split], low)
-        while True:
-            grand = parent[parent]
-            if np.array_equal(grand, parent):
-                break
-            parent = grand
+    _TWO_SIDED[mesh][everywhere] = (prepared, open_faces, detached)
+    return TwoSided(mesh if prepared is None else prepared, open_faces, detached)
 
 
 @dataclass(frozen=True, eq=False)
@@ -227,7 +197,7 @@ def build_volume(occluders: Mesh, silhouette: Silhouette, light, receiver_bounds
         return Volume(None, cap, edges, 0.0)
     vertices = occluders.vertices.astype(np.float64)
     faces = occluders.faces[cap].astype(np.int64)
-    corners = np.array(np.meshgrid(*box.T, indexing="ij")).reshape(3, -1).T        # (8, 3) box corners
+    corners = box_corners(box)
     if isinstance(light, PointLight):
         position = light.position
         # Corner by corner, relative to the light: NumPy's reductions over short rows (axis=1 of (C, 3))
@@ -255,8 +225,15 @@ def build_volume(occluders: Mesh, silhouette: Silhouette, light, receiver_bounds
         far = vertices + extrusion * direction
         reach = nearest + extrusion
     if not (np.isfinite(extrusion) and np.all(np.abs(far) < FLOAT32_SAFE)):
-        raise ValueError("light: lies (almost) in the plane of a light-facing face; the shadow volume's far cap "
-                         f"cannot be placed past the receivers in float32 (extrusion {extrusion:.3g})")
+        size = bounds_diagonal(occluders.bounds)
+        if isinstance(light, PointLight) and nearest < 1e-6 * size:
+            cause = (f"light: lies (almost) in the plane of a light-facing face ({nearest:.3g} from it, the "
+                     f"occluders are {size:.3g} across)")
+        else:
+            cause = (f"receiver_bounds: the receivers reach {max(depth if not isinstance(light, PointLight) else farthest, 0):.3g} "
+                     f"from the light, too far beyond occluders {size:.3g} across")
+        raise ValueError(f"{cause}; the shadow volume's far cap cannot be placed past the receivers in float32 "
+                         f"(extrusion {extrusion:.3g})")
     nv = len(vertices)
     a, b = edges[:, 0], edges[:, 1]
     volume_faces = np.concatenate([
@@ -267,59 +244,6 @@ def build_volume(occluders: Mesh, silhouette: Silhouette, light, receiver_bounds
     ])
     mesh = Mesh(np.concatenate([occluders.vertices, far.astype(np.float32)]), volume_faces)
     return Volume(mesh, cap, edges, float(extrusion), float(reach))
-
-
-def ray_crossings(triangles: np.ndarray, origin: np.ndarray) -> np.ndarray:
-    """(T,) int per triangle of ``triangles`` ((T, 3, 3) float64, counter-clockwise outward): +1 where a
-    ray from ``origin`` leaves through it (along its outward normal), -1 where it enters, 0 where it
-    misses. The ray's direction is drawn (seeded) and redrawn while it passes within EDGE_MARGIN
-    (barycentric) of a triangle's edge: through a shared edge or vertex it would count both faces or
-    neither. Summed over a closed surface this is the origin's winding number. Möller-Trumbore, float64."""
-    rng = np.random.default_rng(RAY_SEED)
-    v0 = triangles[:, 0]
-    e1, e2 = triangles[:, 1] - v0, triangles[:, 2] - v0
-    s = origin - v0
-    q = np.cross(s, e1)
-    for _ in range(RAY_TRIES):
-        d = rng.standard_normal(3)
-        p = np.cross(d, e2)
-        det = np.einsum("ij,ij->i", e1, p)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            inv = 1.0 / det
-            u = np.einsum("ij,ij->i", s, p) * inv
-            v = (q @ d) * inv
-            t = np.einsum("ij,ij->i", e2, q) * inv
-            inside = np.minimum(np.minimum(u, v), 1 - u - v)        # NaN where det = 0: never a hit
-        ahead = (det != 0) & (t > 0)
-        if not np.any(ahead & (np.abs(inside) <= EDGE_MARGIN)):
-            break
-    # det = e1 . (d x e2) = d . (e2 x e1) = -d . n: leaving (d . n > 0) is det < 0.
-    return np.where(ahead & (inside > 0), np.where(det < 0, 1, -1), 0)
-
-
-def _light_inside_closed(prepared: TwoSided, position: np.ndarray) -> bool:
-    """Whether the point light at ``position`` has a nonzero winding number with respect to one of the
-    closed one-sided components of ``prepared`` (see the module doc). Only components whose bounding
-    box holds the light are traced (outside it the winding number is 0); the boxes are cached per mesh:
-    the ogre's 66 k closed faces took ~30 ms a frame otherwise."""
-    labels = prepared.closed_component
-    boxes = _CLOSED_BOXES.get(prepared.mesh)
-    if boxes is None or len(boxes[0]) != np.count_nonzero(labels >= 0):
-        closed = np.flatnonzero(labels >= 0)
-        closed = closed[np.argsort(labels[closed], kind="stable")]           # grouped by component
-        corners = prepared.mesh.vertices[prepared.mesh.faces[closed]]
-        sizes = np.diff(np.r_[np.flatnonzero(np.r_[True, np.diff(labels[closed]) != 0]), len(closed)])
-        starts = np.cumsum(sizes) - sizes
-        boxes = (closed, sizes, np.minimum.reduceat(corners.min(axis=1), starts) if len(closed) else corners[:0, 0],
-                 np.maximum.reduceat(corners.max(axis=1), starts) if len(closed) else corners[:0, 0])
-        _CLOSED_BOXES[prepared.mesh] = boxes
-    closed, sizes, low, high = boxes
-    closed = closed[np.repeat(np.all((low <= position) & (position <= high), axis=1), sizes)]
-    if len(closed) == 0:
-        return False
-    triangles = prepared.mesh.vertices[prepared.mesh.faces[closed]].astype(np.float64)     # not .triangles: all faces
-    signs = ray_crossings(triangles, np.asarray(position, dtype=np.float64))
-    return bool(np.any(np.bincount(prepared.closed_component[closed], weights=signs) != 0))
 
 
 def _missing_silhouettes(silhouette: Silhouette) -> int:
@@ -344,6 +268,8 @@ class ShadowVolumeMethod(Method):
     ``silhouettes_missed``, stage times)."""
 
     name = "shadow_volume"
+    point_light_reach = 2.0 ** 12   # measured (bench/range.py): wrong from ~3e4 sizes
+    min_light_clearance = 1e-4      # measured (bench/range.py): right from 1e-5 off a surface, not at 1e-6
     image_space = True
     parameters = {
         "lod": (None, "occluder level of detail: None (full mesh), a level index of shadowcl.lod.levels, or 'auto' "
@@ -382,7 +308,8 @@ class ShadowVolumeMethod(Method):
             occluders = lod_module.resolve(self.device, mesh, light, box, eps, self.lod, self.max_error)
         t1 = time.perf_counter()
         prepared = two_sided(occluders)
-        inside = isinstance(light, PointLight) and _light_inside_closed(prepared, light.position)
+        # the flipped copies are open components, so the prepared mesh's closed ones are the original's
+        inside = isinstance(light, PointLight) and len(edge_adjacency(prepared.mesh).enclosing_faces(light.position)) > 0
         if inside:
             prepared = two_sided(occluders, everywhere=True)
         self.mesh, self.occluders, self.light, self.eps, self.bounds = mesh, prepared.mesh, light, float(eps), box
@@ -501,7 +428,7 @@ class ShadowVolumeMethod(Method):
         return surface
 
     def _eye_winding(self, view) -> int:
-        """z-pass's starting count: the winding number of the eye, along a float64 ray (:func:`ray_crossings`).
+        """z-pass's starting count: the winding number of the eye (:func:`shadowcl.topology.winding_number`).
         Raises ``ValueError`` when the near plane may cut a volume face (z-pass would miscount)."""
         eye = np.asarray(view.origin, dtype=np.float64)
         inverse = np.linalg.inv(view.matrix)
@@ -519,6 +446,6 @@ class ShadowVolumeMethod(Method):
             raise ValueError(f"stencil='zpass': the camera's near plane may cut {len(close)} shadow-volume faces "
                              "(the eye is within the near rectangle's reach of them), so z-pass would miscount; "
                              "use stencil='zfail'")
-        # Along a ray through every volume face (closed: any direction gives the same number), not the
-        # segment to the light through the caps: that one may pass through an edge two cap faces share.
-        return int(ray_crossings(self.volume.mesh.triangles.astype(np.float64), eye).sum())
+        # Of the whole closed volume (an integer to rounding: the eye is off its faces, checked above),
+        # not a count along the segment to the light, which may pass through an edge two cap faces share.
+        return int(round(winding_number(self.volume.mesh.triangles, eye)))

@@ -9,14 +9,16 @@
 from __future__ import annotations
 
 import copy
+import dataclasses
 import time
 
 import numpy as np
 
 from .checks import check_bounds
 from .device import get_device
+from .frame import check_clearance, frame_for, is_distant, union
 from .geometry import bounds_diagonal
-from .lights import check_light
+from .lights import PointLight, check_light
 from .methods import as_mesh, method_class, occluders, resolve_eps, with_receiver_count
 from .points import BOUNDS_SLACK, Points, check_points
 
@@ -25,11 +27,17 @@ class Shadows:
     """One method prepared for one scene and light: query it with :meth:`mask` and :meth:`visibility`.
 
     Made by :func:`prepare`. Attributes: ``method`` (its name), ``light``, ``eps`` (absolute),
-    ``bounds`` ((2, 3) box the structure is fitted to), ``params`` (every parameter as resolved from the
+    ``bounds`` ((2, 3) the receivers' box the structure is fitted to), ``params`` (every parameter as resolved from the
     scene: what a None default became), ``stats`` (``prepare_s``, ``classify_s`` of the last query,
     ``check_s`` its receiver check, ``device_bytes``, ``receivers``, ``outside_bounds``, then the
     method's own keys). Points outside ``bounds`` are answered correctly too: a method that cannot
-    (a shadow map's single view) answers them from a second structure fitted to them.
+    (a shadow map's single view) answers them from a second structure fitted to them. Such a method's
+    structure is fitted to ``bounds`` cut to :data:`NEAR` occluder sizes round the occluders, so that a
+    few far receivers never coarsen everyone's map; of the receivers beyond, those whose segment to the
+    light misses the occluders' box are lit (nothing can block it), the others get the second structure.
+
+    The method works in the occluders' frame (:mod:`shadowcl.frame`): everything it sees is moved and
+    scaled there first, and inputs outside the working range are refused there.
     """
 
     def __init__(self, scene_or_mesh, light, method: str = "exact", bounds=None, device=None, eps=None,
@@ -41,7 +49,9 @@ class Shadows:
         self.eps = resolve_eps(cls, eps, mesh.bounds)
         self.bounds = mesh.bounds.astype(np.float64) if bounds is None else check_bounds("bounds", bounds)
         self._device = get_device(device)
-        self._occluders = occluders(cls, scene_or_mesh)
+        self._mesh = mesh
+        self._frame = frame_for(mesh, move=not cls.scene_input)
+        self._occluders = occluders(cls, scene_or_mesh) if cls.scene_input else self._frame.mesh(mesh)
         self._params = copy.deepcopy(params)   # kept for _fitted_to: never the caller's arrays
         self._instance = cls(self._device, **self._params)
         self._prepare_s = self._classify_s = self._check_s = 0.0
@@ -53,8 +63,14 @@ class Shadows:
         """Build the structure again for another ``light``, on the same method instance: what does not
         depend on the light is kept, and a silhouette tracker has the last light's frame."""
         self.light = check_light(light)
+        check_clearance(self._mesh, self.light, self._instance.min_light_clearance, self.method)
         start = time.perf_counter()
-        self._instance.prepare(self._occluders, self.light, self.bounds, self.eps)
+        frame = self._frame
+        self._fitted_box, self._refuse_beyond = self._fit(self.light)
+        self._reach = union(self._mesh.bounds, self._fitted_box)   # the box the light is judged distant for
+        self._frame_light = self._method_light(self._reach)
+        self._true_light = frame.light(self.light, self._reach, limit=np.inf)   # never substituted
+        self._instance.prepare(self._occluders, self._frame_light, frame.points(self._fitted_box), frame.length(self.eps))
         self._device.queue.finish()
         self._prepare_s = time.perf_counter() - start
 
@@ -75,34 +91,136 @@ class Shadows:
     def _query(self, kind: str, points, normals) -> np.ndarray:
         start = time.perf_counter()
         receivers = check_points(points, normals)
-        checked = time.perf_counter()
+        split = self._instance.bounded or self._refuse_beyond
+        if not split:
+            self._check_reach(receivers)
         outside = self._outside_bounds(receivers)
-        if self._instance.bounded and len(outside):
+        world, receivers = receivers, self._frame.receivers(receivers)
+        checked = time.perf_counter()
+        if split and len(outside):
             inside = np.ones(len(receivers), dtype=bool)
             inside[outside] = False
             beyond = receivers.subset(outside)
             answer = np.empty(len(receivers), dtype=bool if kind == "classify" else np.float32)
             answer[inside] = getattr(self._instance, kind)(receivers.subset(inside))
-            answer[outside] = getattr(self._fitted_to(beyond), kind)(beyond)
+            # Beyond: a segment that misses the occluders' box is lit, unless its normal faces away.
+            reaching = self._reaching(beyond)
+            answer[outside] = beyond.facing_away(self._true_light) if kind == "classify" \
+                else (~beyond.facing_away(self._true_light)).astype(np.float32)
+            if np.any(reaching) and self._refuse_beyond:
+                first = int(outside[np.argmax(reaching)])
+                raise ValueError(
+                    f"points: {int(reaching.sum())} receiver(s) (first at index {first}: {world.positions[first].tolist()}) "
+                    f"lie so far from the occluders that the point light, {self.method}'s arithmetic cannot resolve "
+                    f"from them, is not parallel for them; use a DirectionalLight or nearer receivers")
+            if np.any(reaching):
+                candidates = beyond.subset(reaching)
+                far = world.subset(outside[reaching]).bounds
+                answer[outside[reaching]] = getattr(self._fitted_to(candidates, far), kind)(candidates)
         else:
             answer = getattr(self._instance, kind)(receivers)
+        answer[self._at_the_light(receivers)] = True if kind == "visibility" else False
         self._check_s, self._classify_s = checked - start, time.perf_counter() - start
         self._outside, self._receivers = len(outside), len(receivers)
         return answer
 
+    def classify_view(self, view, zbuffer, seen) -> np.ndarray:
+        """An ``image_space`` method's mask of the camera's covered pixels (:meth:`Method.classify_view`),
+        with the camera's view and receivers moved to the method's frame."""
+        frame = self._frame
+        self._check_reach(check_points(seen.points))
+        framed = frame.view(view)
+        return self._instance.classify_view(framed, dataclasses.replace(zbuffer, view=framed),
+                                            dataclasses.replace(seen, points=frame.points(seen.points)))
+
+    def _fit(self, light) -> tuple[np.ndarray, bool]:
+        """The (world) box the structure is fitted to, and whether receivers beyond it that the occluders
+        may shadow must be refused: a point light beyond the method's ``point_light_reach`` from the
+        occluders, which it cannot resolve, is given to it as directional (:mod:`shadowcl.frame`) only
+        for receivers near enough for that to hold; beyond them, a segment missing the occluders' box
+        is lit, any other has no right answer from this method."""
+        occluders, limit = self._mesh.bounds, self._instance.point_light_reach
+        box = near_box(self.bounds, occluders) if self._instance.bounded else self.bounds
+        if not is_distant(light, occluders, limit) or is_distant(light, union(occluders, box), limit):
+            return box, False
+        centre = 0.5 * (occluders[0] + occluders[1])
+        half = np.linalg.norm(light.position - centre) / limit
+        while half > 0:
+            cut = np.stack([np.maximum(box[0], centre - half), np.minimum(box[1], centre + half)])
+            if not np.all(cut[0] <= cut[1]):
+                return occluders, True
+            if is_distant(light, union(occluders, cut), limit):
+                return cut, True
+            half *= 0.5
+        return occluders, True
+
+    def _method_light(self, reach: np.ndarray):
+        """The light as the method gets it (:meth:`shadowcl.frame.Frame.light`) for receivers in ``reach``."""
+        return self._frame.light(self.light, reach, self._instance.point_light_reach)
+
+    def _at_the_light(self, receivers: Points) -> np.ndarray:
+        """Indices of the (framed) receivers whose tested segment is at most eps long and whose normal (if
+        any) faces the light: lit by DESIGN.md's meaning (no hit lies beyond eps), whatever a method's
+        projection makes of a point at its eye. Cheap when the light is outside the receivers' box."""
+        light, eps = self._true_light, self._frame.length(self.eps)
+        if not isinstance(light, PointLight) or len(receivers) == 0 or \
+                np.any(light.position < receivers.bounds[0] - 2 * eps) or np.any(light.position > receivers.bounds[1] + 2 * eps):
+            return np.zeros(0, dtype=np.int64)
+        start = receivers.positions
+        if receivers.normals is not None:
+            start = start + eps * receivers.unit_normals()
+        short = np.linalg.norm(light.position - start, axis=1) <= eps
+        return np.flatnonzero(short & ~receivers.facing_away(light))
+
+    def _reaching(self, receivers: Points) -> np.ndarray:
+        """bool (N,): the tested segment (ray) of each framed receiver meets the occluders' box (slab test
+        in float64, the box widened by 1e-6 of its size)."""
+        box = self._frame.points(self._mesh.bounds)
+        box = box + np.array([[-1.0], [1.0]]) * 1e-6 * max(float(np.linalg.norm(box[1] - box[0])), 1e-300)
+        start = receivers.positions
+        if receivers.normals is not None:
+            start = start + self._frame.length(self.eps) * receivers.unit_normals()
+        light = self._true_light
+        if isinstance(light, PointLight):
+            direction, end = light.position - start, 1.0
+        else:
+            direction, end = np.broadcast_to(-light.direction, start.shape), np.inf
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t0, t1 = (box[0] - start) / direction, (box[1] - start) / direction
+        low, high = np.fmin(t0, t1), np.fmax(t0, t1)
+        # a zero component: inside that slab for every t (nan -> ignored by fmax/fmin) or never
+        parallel = direction == 0
+        outside_slab = parallel & ((start < box[0]) | (start > box[1]))
+        enter = np.fmax(np.max(np.where(parallel, -np.inf, low), axis=1), 0.0)
+        leave = np.fmin(np.min(np.where(parallel, np.inf, high), axis=1), end)
+        return (enter <= leave) & ~np.any(outside_slab, axis=1)
+
+    def _check_reach(self, receivers: Points) -> None:
+        """A point light used as directional for ``bounds`` must stay distant for these receivers too."""
+        limit = self._instance.point_light_reach
+        if len(receivers) and is_distant(self.light, self._reach, limit) \
+                and not is_distant(self.light, union(self._reach, receivers.bounds), limit):
+            raise ValueError(f"points: the light was used as a directional light for receivers in {self.bounds.tolist()}; "
+                             f"these reach {receivers.bounds.tolist()}, where it is not parallel enough: "
+                             f"prepare with bounds covering them")
+
     def _outside_bounds(self, receivers: Points) -> np.ndarray:
-        """Indices of the receivers outside ``bounds`` (with :data:`BOUNDS_SLACK`); cheap when none is."""
-        slack = BOUNDS_SLACK * max(bounds_diagonal(self.bounds), np.finfo(np.float32).tiny)
-        low, high = self.bounds[0] - slack, self.bounds[1] + slack
+        """Indices of the receivers outside the box the structure is fitted to (with :data:`BOUNDS_SLACK`);
+        cheap when none is."""
+        box = self._fitted_box
+        slack = BOUNDS_SLACK * max(bounds_diagonal(box), np.finfo(np.float32).tiny)
+        low, high = box[0] - slack, box[1] + slack
         if len(receivers) == 0 or (np.all(receivers.bounds[0] >= low) and np.all(receivers.bounds[1] <= high)):
             return np.zeros(0, dtype=np.int64)
         p = receivers.positions
         return np.flatnonzero(np.any((p < low) | (p > high), axis=1))
 
-    def _fitted_to(self, receivers: Points):
-        """A second instance of the method, prepared for the box of ``receivers`` (outside ``bounds``)."""
+    def _fitted_to(self, receivers: Points, world_box: np.ndarray):
+        """A second instance of the method, prepared for the box of (framed) ``receivers`` (outside the
+        fitted box; ``world_box`` theirs in the world, for the light's judgement)."""
         instance = type(self._instance)(self._device, **self._params)
-        instance.prepare(self._occluders, self.light, receivers.bounds, self.eps)
+        instance.prepare(self._occluders, self._method_light(union(self._mesh.bounds, world_box)), receivers.bounds,
+                         self._frame.length(self.eps))
         return instance
 
     # what was built ------------------------------------------------------------------------------------
@@ -118,6 +236,17 @@ class Shadows:
                 "check_s": self._check_s, "device_bytes": int(own.pop("device_bytes", 0)),
                 "receivers": self._receivers, "outside_bounds": self._outside,
                 **{k: v for k, v in own.items() if k not in ("prepare_s", "classify_s", "receivers")}}
+
+
+NEAR = 1.0   # occluder box diagonals round the occluders' box that a bounded method's structure covers
+
+
+def near_box(bounds: np.ndarray, occluders: np.ndarray) -> np.ndarray:
+    """``bounds`` cut to :data:`NEAR` diagonals round the box ``occluders``; ``bounds`` itself when they
+    do not meet (every receiver is then answered by the second structure or as lit)."""
+    margin = NEAR * bounds_diagonal(occluders)
+    low, high = np.maximum(bounds[0], occluders[0] - margin), np.minimum(bounds[1], occluders[1] + margin)
+    return np.stack([low, high]) if np.all(low <= high) else bounds
 
 
 def prepare(scene_or_mesh, light, method: str = "exact", bounds=None, device=None, eps=None, **params) -> Shadows:

@@ -5,7 +5,8 @@ prepare: voxelize every subdivision surface of the scene into one cubic frame bu
 limit surface with its normal) whether it is lit, and store the states in the frame buffer (0 empty,
 1 lit, 2 shadowed: section 5.2; a voxel with lit and shadowed samples is lit). classify: a point's
 state is its voxel's (when its own is empty, the nearest occupied voxel within 2 voxels, nearest by
-offset; farther points are called lit, counted in ``stats["unplaced"]`` and warned about).
+offset; farther points are called lit and counted in ``stats["unplaced"]``, or refused with
+``unplaced="raise"``), looked up on the device in the frame buffer (kernels/voxel.cl locate_states).
 
 Determination (``determination``):
 
@@ -23,7 +24,7 @@ Determination (``determination``):
 
 Both call a sample whose normal faces away from the light shadowed (N . (L - A) <= 0: the paper's
 "definitely in shadow", and DESIGN.md's meaning with normals). Normals are du x dv of the patches:
-outward for counter-clockwise control faces (host/shadowcl/subdivision.py).
+outward for counter-clockwise control faces (host/shadowcl/subdivision/).
 
 Frame buffer or not (``frame_buffer``): with it (section 5.2) prepare runs everything once and
 classify only reads the states, so another view of the same light costs a lookup; without it
@@ -54,7 +55,6 @@ still draws the scene's tessellation with :meth:`VoxelMethod.visibility`; measur
 from __future__ import annotations
 
 import time
-import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -68,6 +68,7 @@ from .methods import Method
 from .points import check_points
 
 DETERMINATIONS = ("topology", "offset")
+UNPLACED = ("lit", "raise")
 DOT5_FLOATS = 16                 # kernels/ray_triangle.h
 DEFAULT_VOXELS_ACROSS_RECEIVERS = 256   # the paper's "acceptable" resolution, across the receivers' box
 MIN_RESOLUTION, MAX_AUTO_RESOLUTION = 64, 1024
@@ -113,6 +114,9 @@ class VoxelMethod(Method):
     scene_input = True
     own_renderer = True
     eps_meaning = None   # a sample's state is its voxel's: the voxel size, not eps, sets the offset
+    # Measured against exact on scenes/subdivision cube and toroidal_tet (3,000 ground receivers, light along
+    # (0.3, 1, 0.2)): 2-6 differ at 1e3-1e4 scene sizes as at 10, 9-50 at 1e5-1e6 (not in bench/range.py)
+    point_light_reach = 2.0 ** 14
     parameters = {
         "resolution": (None, "voxels per side of the cubic frame buffer (<= 1024); None: 256 across the "
                              "receivers' box, clamped to 64..1024"),
@@ -123,6 +127,8 @@ class VoxelMethod(Method):
                                "recompute per classify (5.1); None: True when it fits the device"),
         "grid_bounds": (None, "(2, 3) world box the cubic grid spans (must hold every control point); None: "
                               "the control points' box"),
+        "unplaced": ("lit", "points farther than 2 voxels from every voxelized surface (no voxel state to read): "
+                            "'lit' calls them lit and counts them in stats['unplaced'], 'raise' raises ValueError"),
     }
 
     def __init__(self, device, **params):
@@ -133,9 +139,11 @@ class VoxelMethod(Method):
         self.connectivity = choice("connectivity", p["connectivity"], vz.CONNECTIVITIES)
         self.frame_buffer = None if p["frame_buffer"] is None else flag("frame_buffer", p["frame_buffer"])
         self.grid_bounds = None if p["grid_bounds"] is None else check_bounds("grid_bounds", p["grid_bounds"])
+        self.unplaced = choice("unplaced", p["unplaced"], UNPLACED)
         self._builder = lightspace.ListBuilder(device, corners=4)
         self._prepared = False
         self._leaf_mesh = None           # (voxelization, its leaf tessellation): made once per voxelization
+        self._placeholder = self._neighbours_dev = None      # device buffers made on first use
 
     def resolved_params(self) -> dict:
         params = dict(self.params)
@@ -250,11 +258,11 @@ class VoxelMethod(Method):
             for phase in (0, 1):
                 kernel("write_states")(queue, (max(nsamples, 1),), None, vox.leaves_dev, np.int32(nsamples), states,
                                        np.int32(phase), vox.frame_dev)
-            self._frame_words = vox.frame_words
-            self._sparse = None
-        else:
-            self._frame_words = None
-            self._sparse = sparse_states(vox.corner_voxels.ravel(), sample_states)
+            self._states_dev = (vox.frame_dev, *self._placeholders()[1:], 0, ("-DSPARSE=0",))
+        else:                               # section 5.1: sorted voxel ids and their states, searched
+            keys, values = sparse_states(vox.corner_voxels.ravel(), sample_states)
+            self._states_dev = (self._placeholders()[0], dev.to_device(keys.astype(np.uint32)),
+                                dev.to_device(np.ascontiguousarray(values)), len(keys), ("-DSPARSE=1",))
         t6 = time.perf_counter()
         stats.update(determination=self.determination, samples=nsamples, shadowed_samples=int(np.sum(sample_states == 2)),
                      voxelize_s=t1 - t0, geometry_s=t2 - t1, determine_s=t5 - t4, states_s=t6 - t5,
@@ -275,40 +283,42 @@ class VoxelMethod(Method):
         return self.device.from_device(self._normals_dev, (4 * self.vox.nleaves, 3), np.float32)
 
     # classify ------------------------------------------------------------------------------------------
+    def _placeholders(self) -> tuple:
+        """(frame, keys, values) placeholder buffers for the arguments a build of voxel.cl does not read."""
+        if self._placeholder is None:
+            self._placeholder = tuple(self.device.empty(4, what) for what in ("no frame buffer", "no voxel ids",
+                                                                               "no voxel states"))
+        return self._placeholder
+
     def _states_of(self, ids: np.ndarray) -> np.ndarray:
-        """uint8 states (0 empty, 1 lit, 2 shadowed) of linear voxel ids."""
-        if self._frame_words is not None:
-            return ((self._frame_words[ids >> 4] >> (2 * (ids & 15)).astype(np.uint32)) & 3).astype(np.uint8)
-        keys, values = self._sparse
-        at = np.clip(np.searchsorted(keys, ids), 0, len(keys) - 1)
-        return np.where(keys[at] == ids, values[at], 0).astype(np.uint8)
+        """uint8 states (0 empty, 1 lit, 2 shadowed) of linear voxel ids (any shape), looked up on the device."""
+        shape = np.shape(ids)
+        ids = np.ascontiguousarray(np.ravel(ids), dtype=np.uint32)
+        frame, keys, values, nkeys, options = self._states_dev
+        out = self.device.empty(max(len(ids), 1), "voxel states")
+        if len(ids):
+            self.device.kernel("voxel.cl", "lookup_states", options)(
+                self.device.queue, (len(ids),), None, self.device.to_device(ids), np.int32(len(ids)), frame, keys,
+                values, np.int32(nkeys), out)
+        return self.device.from_device(out, len(ids), np.uint8).reshape(shape)
 
     def _locate(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(linear voxel id or -1, state) per point: its voxel, else the first occupied voxel within SEARCH
-        voxels, nearest offsets first (points of a tessellation lie off the limit surface by its chord error)."""
-        vox, R = self.vox, self.vox.resolution
-        ijk, _ = vox.voxel_of(points)
-        ids = np.full(len(points), -1, dtype=np.int64)
-        states = np.zeros(len(points), dtype=np.uint8)
-        inside = np.all((ijk >= 0) & (ijk < R), axis=1)
-        own = (ijk[:, 0] * R + ijk[:, 1]) * R + ijk[:, 2]
-        states[inside] = self._states_of(own[inside])
-        ids[inside & (states > 0)] = own[inside & (states > 0)]
-        # Empty voxel: the first occupied one in order of offset length (NEIGHBOURS is sorted), ring 1 first
-        for ring in (NEIGHBOURS[:26], NEIGHBOURS[26:]):
-            missing = np.flatnonzero(states == 0)
-            if not len(missing):
-                break
-            cand = ijk[missing, None, :] + ring[None]
-            ok = np.all((cand >= 0) & (cand < R), axis=2)
-            cid = (np.clip(cand[..., 0], 0, R - 1) * R + np.clip(cand[..., 1], 0, R - 1)) * R + np.clip(cand[..., 2], 0, R - 1)
-            cstate = np.where(ok, self._states_of(cid.ravel()).reshape(cid.shape), 0)
-            best = np.argmax(cstate > 0, axis=1)
-            rows = np.arange(len(missing))
-            found = cstate[rows, best] > 0
-            states[missing[found]] = cstate[rows[found], best[found]]
-            ids[missing[found]] = cid[rows[found], best[found]]
-        return ids, states
+        """(linear voxel id or -1, state) per point, on the device (kernels/voxel.cl locate_states): its
+        voxel, else the first occupied voxel within SEARCH voxels, nearest offsets first (points of a
+        tessellation lie off the limit surface by its chord error). Voxel coordinates come from the host in
+        float64, clipped to just outside the search's reach (farther is as far)."""
+        vox, dev, n = self.vox, self.device, len(points)
+        x = np.floor((np.asarray(points, dtype=np.float64) - vox.origin) / vox.voxel_size)
+        ijk = np.clip(x, -SEARCH - 1, vox.resolution + SEARCH).astype(np.int32)
+        frame, keys, values, nkeys, options = self._states_dev
+        if self._neighbours_dev is None:
+            self._neighbours_dev = dev.to_device(NEIGHBOURS.astype(np.int32))
+        ids_g, states_g = dev.empty(4 * max(n, 1), "located voxels"), dev.empty(max(n, 1), "located states")
+        if n:
+            dev.kernel("voxel.cl", "locate_states", options)(
+                dev.queue, (n,), None, dev.to_device(ijk), np.int32(n), np.int32(vox.resolution), self._neighbours_dev,
+                np.int32(len(NEIGHBOURS)), frame, keys, values, np.int32(nkeys), ids_g, states_g)
+        return dev.from_device(ids_g, n, np.int32).astype(np.int64), dev.from_device(states_g, n, np.uint8)
 
     def _begin_classify(self, points, normals):
         if not self._prepared:
@@ -318,11 +328,12 @@ class VoxelMethod(Method):
         if not self.frame_buffer_used:
             self._run()                     # section 5.1: no frame buffer, so determine again
         ids, states = self._locate(points)
-        unplaced = int(np.sum(ids < 0))
-        self.stats["unplaced"] = unplaced
-        if unplaced:
-            warnings.warn(f"voxel: {unplaced} of {len(points)} points are more than {SEARCH} voxels from every "
-                          "voxelized surface; they are classified lit", stacklevel=3)
+        unplaced = np.flatnonzero(ids < 0)
+        self.stats["unplaced"] = len(unplaced)
+        if len(unplaced) and self.unplaced == "raise":
+            raise ValueError(f"points: {len(unplaced)} of {len(points)} are more than {SEARCH} voxels from every "
+                             f"voxelized surface (first: index {unplaced[0]}, {points[unplaced[0]].tolist()}), so the "
+                             "voxel method has no state for them; unplaced='lit' calls them lit")
         return ids, states, receivers.facing_away(self.light)
 
     def classify(self, points, normals=None) -> np.ndarray:

@@ -1,6 +1,6 @@
 """Voxelization of Catmull-Clark limit surfaces by parameter-space subdivision (Lai & Cheng, section 3).
 
-Each patch of the patch table (host/shadowcl/subdivision.py's contract: ``points``, ``first``,
+Each patch of the patch table (host/shadowcl/subdivision/patches.py's contract: ``points``, ``first``,
 ``levels``) is split at parameter midpoints, breadth first on the device (kernels/voxelize.cl), until
 its four corner voxels fit in a 2 x 2 x 2 block and the corner voxels of each of its edges are
 N-adjacent (N = ``connectivity``: 6, 18 or 26). Such a subpatch is a *leaf*: its corners' voxels go
@@ -52,18 +52,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pyopencl as cl
-from scipy import sparse
-from scipy.sparse import csgraph
 from scipy.spatial import cKDTree
 
 from .checks import check_bounds, choice, positive_int
 from .geometry import Mesh
+from .topology import components
 
 CONNECTIVITIES = (6, 18, 26)
 MAX_RESOLUTION = 1024      # linear voxel indices (i * R + j) * R + k are 32-bit (kernels/voxelize.cl)
 MAX_DEPTH = 24             # kernels/voxelize.cl: subdivision levels (parameters exact in float32)
 LEAF_WORDS = 20            # kernels/voxelize.cl: leaf record
 GROWTH = 1.25              # capacity headroom over a counted overflow
+COUNTER_MAX = 2**31 - 1    # kernels/voxelize.cl's int slot counters: a level that could pass it is refused
 
 
 @dataclass
@@ -270,6 +270,10 @@ def voxelize(device, surface_or_table, resolution: int, connectivity: int = 26,
     per_level = []
     level = 0
     while n_in > 0:
+        # A level adds at most 4 queue slots and one leaf per item: refused before a counter could wrap
+        if 4 * n_in > COUNTER_MAX or nleaves + n_in > COUNTER_MAX:
+            raise ValueError(f"resolution: {resolution} needs {n_in} subpatches at level {level} after {nleaves} "
+                             f"leaves, more than the voxelizer's 32-bit counters hold ({COUNTER_MAX}); use a lower one")
         while True:
             cl.enqueue_copy(queue, counters, np.array([0, nleaves, forced], dtype=np.int32))
             kernel(queue, (n_in,), None, points_g, first_g, levels_g, items_in, np.int32(n_in), items_out,
@@ -281,10 +285,10 @@ def voxelize(device, surface_or_table, resolution: int, connectivity: int = 26,
             # Overflow: grow what ran out (leaves keep their prefix) and rerun the level
             reruns += 1
             if wanted_out > out_cap:
-                out_cap = int(wanted_out * GROWTH)
+                out_cap = min(int(wanted_out * GROWTH), COUNTER_MAX)
                 items_out = dev.empty(16 * out_cap, "voxelization queue")
             if wanted_leaves > leaf_cap:
-                leaf_cap = int(wanted_leaves * GROWTH)
+                leaf_cap = min(int(wanted_leaves * GROWTH), COUNTER_MAX)
                 grown = dev.empty(4 * LEAF_WORDS * leaf_cap, "voxelization leaves")
                 if nleaves:
                     cl.enqueue_copy(queue, grown, leaves_g, byte_count=4 * LEAF_WORDS * nleaves)
@@ -346,47 +350,6 @@ def merge_tables(tables) -> Patches:
         patch_base += len(first[-1])
     return Patches(np.concatenate(points), np.concatenate(first).astype(np.uint32), np.concatenate(levels),
                    np.concatenate(neighbors).astype(np.int32))
-
-
-def grid_patch_table(net, wrap_u: bool = False, wrap_v: bool = False) -> Patches:
-    """Regular B-spline patches of the (m, n, 3) control grid ``net`` (u along the first axis, v along
-    the second): one per interior span, or per span along a wrapped axis (a torus wraps both).
-
-    Patch normals (du x dv) follow the grid's orientation: make it outward for closed surfaces.
-    """
-    net = np.asarray(net, dtype=np.float64)
-    if net.ndim != 3 or net.shape[2] != 3:
-        raise ValueError(f"net: expected an (m, n, 3) control grid, got shape {net.shape}")
-    m, n = net.shape[:2]
-    pu = m if wrap_u else m - 3
-    pv = n if wrap_v else n - 3
-    if pu < 1 or pv < 1:
-        raise ValueError("net: too few control points for one patch (4 per open axis)")
-    a0 = np.arange(pu) - (1 if wrap_u else 0)
-    b0 = np.arange(pv) - (1 if wrap_v else 0)
-    ii, jj = np.arange(4), np.arange(4)
-    A = (a0[:, None, None, None] + ii[None, None, None, :]) % m          # [a, b, j, i]
-    B = (b0[None, :, None, None] + jj[None, None, :, None]) % n
-    A, B = np.broadcast_arrays(A, B)
-    points = net[A, B].reshape(-1, 3).astype(np.float32)
-    count = pu * pv
-    a, b = np.meshgrid(np.arange(pu), np.arange(pv), indexing="ij")
-
-    def index(x, y):
-        ok = np.ones_like(x, dtype=bool)
-        if wrap_u:
-            x = x % pu
-        else:
-            ok &= (x >= 0) & (x < pu)
-        if wrap_v:
-            y = y % pv
-        else:
-            ok &= (y >= 0) & (y < pv)
-        return np.where(ok, np.clip(x, 0, pu - 1) * pv + np.clip(y, 0, pv - 1), -1)
-
-    neighbors = np.stack([index(a, b - 1), index(a + 1, b), index(a, b + 1), index(a - 1, b)], axis=-1)
-    return Patches(points, (16 * np.arange(count)).astype(np.uint32), np.zeros(count, np.uint32),
-                          neighbors.reshape(-1, 4).astype(np.int32))
 
 
 # Crack-free tessellation of the leaves (section 5.3) ------------------------------------------------
@@ -539,8 +502,8 @@ def tessellate(vox: Voxelization) -> LeafMesh:
         return (p * W + u) * W + v
 
     keys, inverse = np.unique(np.concatenate([vkey(cp, cu, cv), vkey(q, mu, mv)]), return_inverse=True)
-    links = sparse.coo_matrix((np.ones(len(linked)), (inverse[linked], inverse[4 * n:])), shape=(len(keys),) * 2)
-    count, label = csgraph.connected_components(links, directed=False)
+    label = components(len(keys), np.stack([inverse[linked], inverse[4 * n:]], axis=1))
+    count = int(label.max(initial=-1)) + 1
     first_sample = np.full(count, 4 * n, np.int64)
     np.minimum.at(first_sample, label[inverse[:4 * n]], np.arange(4 * n))
     vertices = positions[first_sample]

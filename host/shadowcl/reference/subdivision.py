@@ -251,3 +251,79 @@ def _bspline_net(mesh: ControlMesh, quad: list[int]) -> np.ndarray:
             else:
                 grid[(i, j)] = 2 * grid[(ia, j)] - grid[(ib, j)]
     return np.array([[grid[(i, j)] for i in range(4)] for j in range(4)])
+
+
+def tessellation_grid(faces, segments: int):
+    """The tessellation grid by a per-sample loop over a dictionary of point names (the library's
+    first version, kept as the reference of shadowcl.subdivision.tessellation): (face, u, v) of every
+    vertex (shared points once, in order of first appearance), the (T, 3) triangles (two per cell) and
+    (face, u, v) of every cell's centre."""
+    keys: dict[tuple, int] = {}
+    face_of, us, vs = [], [], []
+    triangles, centres = [], []
+
+    def edge_key(x, y, t):
+        if t == 0:
+            return ("v", x)
+        if t == segments:
+            return ("v", y)
+        return ("e", x, y, t) if x < y else ("e", y, x, segments - t)
+
+    for f, corners in enumerate(faces):
+        corners = corners.tolist()
+        n = len(corners)
+        size = segments if n == 4 else segments // 2
+        for j in range(1 if n == 4 else n):
+            grid = np.empty((size + 1, size + 1), dtype=np.int64)
+            for b in range(size + 1):
+                for a in range(size + 1):
+                    if n == 4:
+                        key = _quad_key(f, corners, a, b, segments, edge_key)
+                    else:
+                        key = _ngon_key(f, corners, j, a, b, size, segments, edge_key)
+                    index = keys.get(key)
+                    if index is None:
+                        index = keys[key] = len(face_of)
+                        face_of.append(f)
+                        if n != 4 and a == size:
+                            # u = j + 1 would select sub-face j + 1: name the point from there.
+                            u_, v_ = (n, 1.0) if b == size else ((j + 1) % n + b / size, 1.0)
+                        else:
+                            u_, v_ = j + a / size, b / size
+                        us.append(u_)
+                        vs.append(v_)
+                    grid[b, a] = index
+            p00, p10 = grid[:-1, :-1].ravel(), grid[:-1, 1:].ravel()
+            p01, p11 = grid[1:, :-1].ravel(), grid[1:, 1:].ravel()
+            pair = np.stack([np.stack([p00, p10, p11], 1), np.stack([p00, p11, p01], 1)], 1)
+            triangles.append(pair.reshape(-1, 3))
+            cu, cv = np.meshgrid((np.arange(size) + 0.5) / size, (np.arange(size) + 0.5) / size)
+            centres.append(np.stack([np.full(cu.size, f), j + cu.ravel(), cv.ravel()]))
+    centres = np.concatenate(centres, axis=1)
+    return (np.array(face_of), np.array(us, dtype=np.float64), np.array(vs, dtype=np.float64),
+            np.concatenate(triangles), (centres[0].astype(np.int64), centres[1], centres[2]))
+
+def _quad_key(f, c, a, b, s, edge_key) -> tuple:
+    if b == 0:
+        return edge_key(c[0], c[1], a)
+    if a == s:
+        return edge_key(c[1], c[2], b)
+    if b == s:
+        return edge_key(c[2], c[3], s - a)
+    if a == 0:
+        return edge_key(c[3], c[0], s - b)
+    return ("f", f, a, b)
+
+def _ngon_key(f, c, j, a, b, h, s, edge_key) -> tuple:
+    n = len(c)
+    if b == 0:
+        return edge_key(c[j], c[(j + 1) % n], a)
+    if a == 0:
+        return edge_key(c[j - 1], c[j], s - b)
+    if a == h and b == h:
+        return ("c", f)
+    if a == h:
+        return ("l", f, j, b)
+    if b == h:
+        return ("l", f, (j - 1) % n, a)
+    return ("f", f, j, a, b)

@@ -123,3 +123,24 @@ def _border_distance(points, views, nx, ny):
         G = P[:, :2] / P[:, 2:3]
         out[sel] = np.min(np.abs(G - np.round(G)), axis=1)
     return out
+
+
+def locate(states, points, origin, voxel_size: float, search: int = 2):
+    """(id or -1, state) per point from the dense (R, R, R) ``states`` (0 empty, 1 lit, 2 shadowed): the
+    point's voxel when occupied, else the occupied voxel within ``search`` voxels (per axis) at the
+    smallest Chebyshev ring, then the smallest squared offset, then the lexicographically least offset."""
+    R = states.shape[0]
+    offsets = [(a, b, c) for a in range(-search, search + 1) for b in range(-search, search + 1)
+               for c in range(-search, search + 1)]
+    offsets.sort(key=lambda o: (max(map(abs, o)), sum(x * x for x in o), o))
+    ids, found = np.full(len(points), -1, dtype=np.int64), np.zeros(len(points), dtype=np.uint8)
+    for p, point in enumerate(np.asarray(points, dtype=np.float64)):
+        base = np.floor((point - origin) / voxel_size)
+        if np.any(np.abs(base) > 4 * R):
+            continue
+        for o in offsets:
+            i, j, k = (int(x) for x in base + o)
+            if 0 <= i < R and 0 <= j < R and 0 <= k < R and states[i, j, k]:
+                ids[p], found[p] = (i * R + j) * R + k, states[i, j, k]
+                break
+    return ids, found

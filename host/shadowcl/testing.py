@@ -1,10 +1,11 @@
-"""Generators for the hard cases of DESIGN.md that are made in code, shared by tests and the bench."""
+"""Test fixtures shared by tests/ and bench/ (not used by the library): hard cases of DESIGN.md made in code."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from .geometry import Mesh
+from .voxelize import Patches
 
 
 def icosphere(subdivisions: int) -> Mesh:
@@ -49,3 +50,44 @@ def aimed_receivers(mesh: Mesh, towards_light, per_edge: int, rng, light_positio
         heights = receivers[lo:lo + chunk] @ normals.T - offsets
         inside[lo:lo + chunk] = heights.max(axis=1) < 0
     return receivers[inside]
+
+
+def grid_patch_table(net, wrap_u: bool = False, wrap_v: bool = False) -> Patches:
+    """Regular B-spline patches of the (m, n, 3) control grid ``net`` (u along the first axis, v along
+    the second): one per interior span, or per span along a wrapped axis (a torus wraps both).
+
+    Patch normals (du x dv) follow the grid's orientation: make it outward for closed surfaces.
+    """
+    net = np.asarray(net, dtype=np.float64)
+    if net.ndim != 3 or net.shape[2] != 3:
+        raise ValueError(f"net: expected an (m, n, 3) control grid, got shape {net.shape}")
+    m, n = net.shape[:2]
+    pu = m if wrap_u else m - 3
+    pv = n if wrap_v else n - 3
+    if pu < 1 or pv < 1:
+        raise ValueError("net: too few control points for one patch (4 per open axis)")
+    a0 = np.arange(pu) - (1 if wrap_u else 0)
+    b0 = np.arange(pv) - (1 if wrap_v else 0)
+    ii, jj = np.arange(4), np.arange(4)
+    A = (a0[:, None, None, None] + ii[None, None, None, :]) % m          # [a, b, j, i]
+    B = (b0[None, :, None, None] + jj[None, None, :, None]) % n
+    A, B = np.broadcast_arrays(A, B)
+    points = net[A, B].reshape(-1, 3).astype(np.float32)
+    count = pu * pv
+    a, b = np.meshgrid(np.arange(pu), np.arange(pv), indexing="ij")
+
+    def index(x, y):
+        ok = np.ones_like(x, dtype=bool)
+        if wrap_u:
+            x = x % pu
+        else:
+            ok &= (x >= 0) & (x < pu)
+        if wrap_v:
+            y = y % pv
+        else:
+            ok &= (y >= 0) & (y < pv)
+        return np.where(ok, np.clip(x, 0, pu - 1) * pv + np.clip(y, 0, pv - 1), -1)
+
+    neighbors = np.stack([index(a, b - 1), index(a + 1, b), index(a, b + 1), index(a - 1, b)], axis=-1)
+    return Patches(points, (16 * np.arange(count)).astype(np.uint32), np.zeros(count, np.uint32),
+                          neighbors.reshape(-1, 4).astype(np.int32))
