@@ -480,3 +480,44 @@ def test_bulk_ascii_stl_agrees_with_the_line_parser(facets, hostile, newline):
     assert outcome(meshio._read_stl) == outcome(meshio._read_ascii_stl_by_line)
     if not hostile and facets:
         assert meshio._read_ascii_stl_bulk(data) is not None
+
+
+PLY_HOSTILE = ["1.0", "-1", "1e", "nan", "a", "+2", "99999999999999999999", "\xa0"]
+
+
+@settings(max_examples=200, deadline=5000, derandomize=True, database=None)
+@given(nv=st.integers(0, 4), nf=st.integers(0, 3), flag=st.booleans(), hostile=st.booleans(), data=st.data())
+def test_bulk_ascii_ply_agrees_with_the_line_parser(nv, nf, flag, hostile, data):
+    """ASCII PLY files (x y z, maybe an int property; faces of a list) of plain and hostile rows (short
+    rows, lists longer than their row, floats as indices, row counts off by one): the bulk reader gives
+    the line parser's outcome, and reads the plain ones itself."""
+    from unittest import mock
+
+    from shadowcl import meshio
+
+    bad = PLY_HOSTILE if hostile else []
+    number, integer = st.sampled_from(["0", "1", "-2.5", "3e-1"] * 40 + bad), st.sampled_from(["0", "-3", "7"] * 40 + bad)
+    vertex = st.tuples(number, number, number, integer if flag else st.just(""), st.sampled_from(["", "", "5"]))
+    rows = [" ".join(data.draw(vertex)).strip() for _ in range(nv + hostile * data.draw(st.sampled_from([0, 0, -1, 1])))]
+    for _ in range(nf):
+        corners = data.draw(st.lists(st.sampled_from([str(i) for i in range(max(nv, 1))] * 40 + bad), min_size=3, max_size=4))
+        size = str(len(corners) + hostile * data.draw(st.sampled_from([0, 0, 1, -1])))
+        rows.append(" ".join([data.draw(st.sampled_from([size] * 10 + bad))] + corners))
+    header = ["ply", "format ascii 1.0", f"element vertex {nv}", "property float x", "property float y",
+              "property float z"] + (["property int flag"] if flag else []) + [
+              f"element face {nf}", "property list uchar int vertex_indices", "end_header"]
+    data_bytes = "\n".join(header + rows + [""]).encode("latin-1")
+
+    def outcome():
+        try:
+            polygons = meshio._read_ply(data_bytes)
+        except ValueError as error:
+            return str(error)
+        return polygons.vertices.tolist(), polygons.corners.tolist(), polygons.sizes.tolist()
+
+    real, bulk_results = meshio._ply_ascii_bulk, []
+    with mock.patch.object(meshio, "_ply_ascii_bulk", lambda *args: bulk_results.append(real(*args)) or bulk_results[-1]):
+        with_bulk = outcome()
+    with mock.patch.object(meshio, "_ply_ascii_bulk", lambda *args: None):
+        assert with_bulk == outcome()
+    assert hostile or bulk_results[0] is not None   # the bulk path itself reads plain files

@@ -170,6 +170,13 @@ def _tokens(text: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return start, np.searchsorted(np.flatnonzero(text == 10), np.flatnonzero(start))
 
 
+def _non_blank_lines(token_line: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The lines holding tokens (given each token's line, in order) and the index of each one's first token."""
+    new_line = np.ones(len(token_line), dtype=bool)
+    new_line[1:] = token_line[1:] != token_line[:-1]
+    return token_line[new_line], np.flatnonzero(new_line)
+
+
 def _read_obj_bulk(data: bytes) -> Polygons | None:
     """The polygons of an OBJ file whose 'v' and 'f' records are plain numbers, parsed in bulk; None
     when a record needs the line parser (which then reads the unusual form or names the problem), so
@@ -270,8 +277,7 @@ def _read_off_bulk(data: bytes) -> Polygons | None:
     if _has_unusual_space(data):
         return None
     start, token_line = _tokens(text)
-    new_line = np.concatenate([[True], token_line[1:] != token_line[:-1]])
-    lines, first = token_line[new_line], np.flatnonzero(new_line)   # the non-blank lines, their first token
+    lines, first = _non_blank_lines(token_line)
     if len(lines) < 2 or first[1] != 1:     # the header alone on its line, then the counts
         return None
     ends = np.flatnonzero(text == 10)
@@ -370,8 +376,7 @@ def _read_ascii_stl_bulk(data: bytes) -> Polygons | None:
     if _has_unusual_space(data):
         return None
     start, token_line = _tokens(text)
-    new_line = np.concatenate([[True], token_line[1:] != token_line[:-1]])
-    lines, first = token_line[new_line], np.flatnonzero(new_line)   # the non-blank lines, their first token
+    lines, first = _non_blank_lines(token_line)
     tokens_per_line = np.diff(np.append(first, len(token_line)))
     at = np.flatnonzero(start)[first]                                # where each line's first word begins
     width = max(map(len, STL_KEYWORDS)) + 1
@@ -487,17 +492,73 @@ def _read_ply(data: bytes) -> Polygons:
     if not lists:
         raise _Malformed(f"the face element needs an integer list property {' or '.join(FACE_LISTS)}", face.line)
     if order == "ascii":
-        rows, row_lines = _ply_ascii(data, body_start, elements, len(header))
+        bulk = _ply_ascii_bulk(data, body_start, elements, len(header))
+        rows, row_lines = bulk if bulk is not None else _ply_ascii(data, body_start, elements, len(header))
     else:
         rows, row_lines = _ply_binary(data, body_start, elements, order), {}
     xyz = np.stack([rows["vertex"][axis] for axis in "xyz"], axis=1)
     polygons = rows["face"][lists[0]]
-    if isinstance(polygons, np.ndarray):        # every face has the same number of corners
+    if isinstance(polygons, np.ndarray) and polygons.ndim == 2:   # every face has the same number of corners
         sizes, corners = np.full(len(polygons), polygons.shape[1]), polygons.ravel()
-    else:
+    else:   # a list of faces, or no face at all (an empty 1-D array)
         sizes = np.array([len(p) for p in polygons], dtype=np.int64)
-        corners = np.concatenate(polygons) if polygons else np.zeros(0, np.int64)
+        corners = np.concatenate(polygons) if len(polygons) else np.zeros(0, np.int64)
     return _checked(xyz, corners.astype(np.int64), sizes, row_lines.get("vertex"), row_lines.get("face"))
+
+
+def _ply_ascii_bulk(data: bytes, start: int, elements: list, header_lines: int) -> tuple[dict, dict] | None:
+    """:func:`_ply_ascii`'s result parsed in bulk, for elements of numbers only or of one list only (a
+    face); None when the line parser must read the rows or name their problem (both agree on every file)."""
+    if _has_unusual_space(data):
+        return None
+    body = np.frombuffer(data[start:] + b"\n", dtype=np.uint8)
+    if not FLOAT_BYTES[body].all():
+        return None
+    start_byte, token_line = _tokens(body)
+    lines, first = _non_blank_lines(token_line)
+    if len(lines) != sum(element.count for element in elements):
+        return None
+    values = _bulk_numbers(body, np.float64, len(token_line))
+    if values is None:
+        return None
+    tokens_per_line = np.diff(np.append(first, len(values)))
+    token_starts = np.flatnonzero(start_byte)   # a token's bytes run to the next token's start
+    integer = ~np.logical_or.reduceat(FLOAT_MARKS[body], token_starts) if len(values) else start_byte[:0]
+    integer &= np.abs(values) < 2**53          # exact in float64, as int() reads it
+
+    def numbers(used, kind):   # the values at token indices ``used``, or None where int() would refuse one
+        return values[used] if kind.startswith("f") or integer[used].all() else None
+
+    rows, row_lines, at = {}, {}, 0
+    for element in elements:
+        row_first, row_tokens = first[at:at + element.count], tokens_per_line[at:at + element.count]
+        row_lines[element.name] = lines[at:at + element.count] + header_lines + 1
+        at += element.count
+        if all(length is None for _, _, length in element.properties):
+            if len(row_first) and row_tokens.min() < len(element.properties):
+                return None
+            rows[element.name] = {}
+            for column, (name, kind, _) in enumerate(element.properties):
+                rows[element.name][name] = numbers(row_first + column, kind)
+                if rows[element.name][name] is None:
+                    return None
+        elif len(element.properties) == 1:
+            (name, kind, _), = element.properties
+            sizes = numbers(row_first, "int")
+            if sizes is None or np.any(sizes < 0) or np.any(row_tokens < sizes + 1):
+                return None
+            sizes = sizes.astype(np.int64)
+            used = np.repeat(row_first + 1, sizes) + (np.arange(sizes.sum()) - np.repeat(np.cumsum(sizes) - sizes, sizes))
+            items = numbers(used, kind)
+            if items is None:
+                return None
+            items = items if kind.startswith("f") else items.astype(np.int64)
+            uniform = len(sizes) and np.all(sizes == sizes[0])
+            rows[element.name] = {name: items.reshape(len(sizes), -1) if uniform else
+                                  np.split(items, np.cumsum(sizes)[:-1]) if len(sizes) else []}
+        else:
+            return None
+    return rows, row_lines
 
 
 def _ply_ascii(data: bytes, start: int, elements: list, header_lines: int) -> tuple[dict, dict]:
