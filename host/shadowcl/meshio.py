@@ -31,6 +31,8 @@ class Polygons:
 
     def triangles(self) -> np.ndarray:
         """(T, 3) int64: each polygon fan-triangulated from its first corner."""
+        if np.all(self.sizes == 3):   # triangles already (most files): no fan to build
+            return self.corners.reshape(-1, 3)
         starts = np.cumsum(self.sizes) - self.sizes
         fans = self.sizes - 2
         first = np.repeat(starts, fans)
