@@ -8,12 +8,14 @@
  *
  * The passes: the count / scan / fill of the occluder lists (lightspace.cl) applied to the receivers,
  * then the walk in the irregular Z-buffer's traversal order (the receivers of a cell together):
- *   exact_bin_count  per receiver: check it, start it (s and its interval), find its fine cell, take a
- *                    slot there (atomic_inc on the cell's count); the code of a receiver needing no walk
+ *   exact_bin_count  per receiver: check it, start it (s and its interval), write the start in the
+ *                    caller's order, find its fine cell and take a slot there (atomic_inc on its count);
+ *                    the code of a receiver needing no walk
  *   (host)           exclusive prefix sum of the counts (lightspace.ListBuilder.prefix_sum)
- *   exact_bin_fill   per receiver again (the same arithmetic, so the same cell): its record at its
- *                    cell's offset + its slot
- *   exact_classify   per packet of LANES consecutive records: the receivers of a cell share its list,
+ *   exact_bin_fill   per receiver with a slot: its start and its index at its cell's offset + its slot
+ *                    (the cell found again from the start, not from the points and normals)
+ *   exact_classify   per packet of LANES consecutive binned receivers (cells found again from their
+ *                    starts): the receivers of a cell share its list,
  *                    each triangle is loaded once and tested against all the packet's lanes still
  *                    unshadowed (plane cull and test over lanes: ray_triangle.h, vecmath.h), the walk
  *                    ends when they are all shadowed; each answer is written at its receiver's index.
@@ -24,15 +26,15 @@
  *
  * Build options:
  *   LIGHT_POINT   1: point light at (lx, ly, lz); 0: directional light travelling along (lx, ly, lz) (unit)
- *   NORMALS       1: normals given
  *   TEST_DOT5     0: watertight test (after the plane cull) on WT_FLOATS records; 1: dot5 on DOT5_FLOATS
- *   COARSE        1: also walk the receiver's coarse-cell list (0 when no primitive is coarse)
  *   LISTS_LINKED  0: CSR lists (offsets, items); 1: linked lists (heads, nodes)
  *   INPUT_F64     1: points and normals arrive as float64 world coordinates and are made relative to
  *                 (ox, oy, oz) and rounded here, exactly as the host would (needs cl_khr_fp64);
  *                 0: they arrive as float32, already relative
  *   LANES         receivers per packet (vecmath.h)
  *   NVIEWS, PERSPECTIVE: the light-space grid (lightspace.h)
+ * Everything else (normals given or not, coarse lists empty or not) is an argument: one program serves
+ * a prepared method's every kernel and call (on PoCL each build costs ~0.2 s of a cold start).
  *
  * Codes in out[i]: 1 in shadow, 0 lit, 3 the point is not finite, 4 the normal is zero or not finite
  * (the host raises for 3 and 4).
@@ -43,9 +45,6 @@
 #ifndef LIGHT_POINT
 #define LIGHT_POINT 1
 #endif
-#ifndef NORMALS
-#define NORMALS 0
-#endif
 #ifndef TEST_DOT5
 #define TEST_DOT5 0
 #endif
@@ -54,9 +53,6 @@
 #endif
 #ifndef INPUT_F64
 #define INPUT_F64 0
-#endif
-#ifndef COARSE
-#define COARSE 1
 #endif
 
 #if INPUT_F64
@@ -67,7 +63,6 @@ typedef float input_t;
 #endif
 
 #define SC_FINITE(x) ((x) - (x) == 0.0f)
-#define RECEIVER_FLOATS 8   /* a binned receiver: sx sy sz tmin, then as int bits fine cell, coarse cell (-1: none), index, 0 */
 #define WALK 0              /* receiver_start: the receiver needs a walk */
 
 #if LIGHT_POINT
@@ -79,14 +74,13 @@ typedef float input_t;
 /* Receiver i's start s (relative float32) and tmin, or its code when it needs no walk (1, 3, 4). */
 INLINE int receiver_start(int i, __global const input_t *points, __global const input_t *normals,
                           input_t ox, input_t oy, input_t oz, float lx, float ly, float lz, float eps,
-                          float *px, float *py, float *pz, float *ptmin)
+                          int with_normals, float *px, float *py, float *pz, float *ptmin)
 {
     float sx = (float)(points[3 * i] - ox), sy = (float)(points[3 * i + 1] - oy), sz = (float)(points[3 * i + 2] - oz);
     if (!(SC_FINITE(sx) & SC_FINITE(sy) & SC_FINITE(sz)))
         return 3;
-#if NORMALS
     /* Back-facing receivers are in shadow; the others start eps along their (unit) normal */
-    {
+    if (with_normals) {
 #if LIGHT_POINT
         const float dx = lx - sx, dy = ly - sy, dz = lz - sz;
 #else
@@ -110,7 +104,6 @@ INLINE int receiver_start(int i, __global const input_t *points, __global const 
             return 1;
         sx += eps * nx_; sy += eps * ny_; sz += eps * nz_;
     }
-#endif
 #if LIGHT_POINT
     const float dx = lx - sx, dy = ly - sy, dz = lz - sz;
     *ptmin = eps / SC_SQRT(dot3(dx, dy, dz, dx, dy, dz));
@@ -138,39 +131,58 @@ INLINE int receiver_cell(__constant const float *views, int brute_cell, float sx
 
 #define BIN_ARGS                                                                                     \
     __global const input_t *points, __global const input_t *normals, int n, input_t ox, input_t oy,  \
-        input_t oz, __constant const float *views, int brute_cell, float lx, float ly, float lz, float eps
+        input_t oz, __constant const float *views, int brute_cell, float lx, float ly, float lz, float eps, \
+        int with_normals
 
 /* Pass 1. Contract: points (n x 3, float32 relative to the local origin, or float64 world with
- * INPUT_F64 and the origin in (ox, oy, oz)), normals likewise if NORMALS (any non-zero length); views:
+ * INPUT_F64 and the origin in (ox, oy, oz)), normals likewise if with_normals (any non-zero length); views:
  * the grid the lists were built on; counts: brute_cell + 1 ints, zeroed. Writes out[i] (the code of a
- * receiver needing no walk, else 0) and slot[i] (its rank in its cell, -1 when it needs no walk). */
-__kernel void exact_bin_count(BIN_ARGS, __global int *counts, __global int *slot, __global uchar *out)
+ * receiver needing no walk, else 0) and slot[i] (its rank in its cell, -1 when it needs no walk); for a
+ * receiver with a slot, start[i] = (s, tmin). */
+__kernel void exact_bin_count(BIN_ARGS, __global int *counts, __global int *slot, __global uchar *out,
+                              __global float4 *start)
 {
     const int i = get_global_id(0);
     if (i >= n)
         return;
     float sx, sy, sz, tmin;
-    int coarse;
-    const int code = receiver_start(i, points, normals, ox, oy, oz, lx, ly, lz, eps, &sx, &sy, &sz, &tmin);
-    slot[i] = (code == WALK) ? atomic_inc(&counts[receiver_cell(views, brute_cell, sx, sy, sz, &coarse)]) : -1;
+    int coarse, s = -1;
+    const int code = receiver_start(i, points, normals, ox, oy, oz, lx, ly, lz, eps, with_normals, &sx, &sy, &sz, &tmin);
+    if (code == WALK) {
+        const int fine = receiver_cell(views, brute_cell, sx, sy, sz, &coarse);
+        start[i] = (float4)(sx, sy, sz, tmin);
+        s = atomic_inc(&counts[fine]);
+    }
+    slot[i] = s;
     out[i] = (uchar)code;
 }
 
-/* Pass 2: every receiver with a slot writes its record at offsets[its cell] + its slot (offsets: the
- * exclusive prefix sum of pass 1's counts). */
-__kernel void exact_bin_fill(BIN_ARGS, __global const int *offsets, __global const int *slot,
-                             __global float *binned)
+/* Pass 2: every receiver with a slot copies its start to binned[k] and its index to index[k], k =
+ * offsets[its fine cell] + its slot (offsets: the exclusive prefix sum of pass 1's counts), so that
+ * they list the receivers cell by cell. The cell is found again from the start (the same arithmetic
+ * on the same floats: the same cell), cheaper than storing it: the scattered writes are the cost.
+ * A slot past its cell's end (a cell differing from pass 1's: a bug) is not written but counted in
+ * *dropped, which the host checks. */
+__kernel void exact_bin_fill(int n, __constant const float *views, int brute_cell, __global const float4 *start,
+                             __global const int *slot, __global const int *offsets, __global float4 *binned,
+                             __global int *index, __global volatile int *dropped)
 {
     const int i = get_global_id(0);
-    if (i >= n || slot[i] < 0)
+    if (i >= n)
         return;
-    float sx, sy, sz, tmin;
-    int coarse;
-    receiver_start(i, points, normals, ox, oy, oz, lx, ly, lz, eps, &sx, &sy, &sz, &tmin);
-    const int cell = receiver_cell(views, brute_cell, sx, sy, sz, &coarse);
-    __global float *r = binned + RECEIVER_FLOATS * (offsets[cell] + slot[i]);
-    r[0] = sx; r[1] = sy; r[2] = sz; r[3] = tmin;
-    r[4] = as_float(cell); r[5] = as_float(coarse); r[6] = as_float(i); r[7] = 0.0f;
+    const int s = slot[i];
+    if (s >= 0) {
+        const float4 r = start[i];
+        int coarse;
+        const int cell = receiver_cell(views, brute_cell, r.x, r.y, r.z, &coarse);
+        const int k = offsets[cell] + s;
+        if (k < offsets[cell + 1]) {
+            binned[k] = r;
+            index[k] = i;
+        } else {
+            atomic_inc(dropped);
+        }
+    }
 }
 
 /* A packet's lanes: their starts, directions to the light, intervals and watertight set-up */
@@ -260,36 +272,41 @@ INLINE lint walk_cells(const int *cell, lint valid, lint hit, const Packet *p, _
     return hit;
 }
 
-/* Pass 3. Contract: binned: nbinned records of pass 2; tris: triangle records (see TEST_DOT5); lists_a,
- * lists_b: (offsets, items) or (heads, nodes) over the grid's cells; (lx, ly, lz): light position
- * (relative) or direction. Writes out[index] for every binned receiver. */
-__kernel void exact_classify(__global const float *binned, int nbinned, __global const float *tris, int ntris,
+/* Pass 3. Contract: binned, index: nbinned starts and receiver indices of pass 2; views: the grid; tris: triangle
+ * records (see TEST_DOT5); lists_a, lists_b: (offsets, items) or (heads, nodes) over the grid's cells;
+ * (lx, ly, lz): light position (relative) or direction; walk_coarse: 0 when no primitive is coarse
+ * (the coarse lists are empty). Writes out[index] for every binned receiver (of n). */
+__kernel void exact_classify(__global const float4 *binned, __global const int *binned_index, int nbinned,
+                             __constant const float *views,
+                             __global const float *tris, int ntris,
                              int brute_cell, __global const int *lists_a, __global const int *lists_b,
-                             float lx, float ly, float lz, __global uchar *out)
+                             float lx, float ly, float lz, int walk_coarse, int n, __global uchar *out)
 {
     const int base = LANES * get_global_id(0);
     if (base >= nbinned)
         return;
-    /* The lanes' records; lanes past the end repeat the last record and are not valid */
+    /* The lanes' receivers; lanes past the end repeat the last one and are not valid */
     float sx[LANES], sy[LANES], sz[LANES], tmin[LANES];
     int fine[LANES], coarse[LANES], index[LANES], lane[LANES];
     for (int j = 0; j < LANES; ++j) {
-        __global const float *r = binned + RECEIVER_FLOATS * min(base + j, nbinned - 1);
-        sx[j] = r[0]; sy[j] = r[1]; sz[j] = r[2]; tmin[j] = r[3];
-        fine[j] = as_int(r[4]); coarse[j] = as_int(r[5]); index[j] = as_int(r[6]);
+        const int k = min(base + j, nbinned - 1);
+        const float4 s = binned[k];
+        sx[j] = s.x; sy[j] = s.y; sz[j] = s.z; tmin[j] = s.w;
+        fine[j] = receiver_cell(views, brute_cell, s.x, s.y, s.z, &coarse[j]);
+        index[j] = binned_index[k];
         lane[j] = base + j;
     }
     const lint valid = LANE_LOAD(int, lane) < nbinned;
     const Packet p = packet(LANE_LOAD(float, sx), LANE_LOAD(float, sy), LANE_LOAD(float, sz), LANE_LOAD(float, tmin),
                             lx, ly, lz);
     lint hit = walk_cells(fine, valid, (lint)0, &p, tris, ntris, brute_cell, lists_a, lists_b);
-#if COARSE
-    hit = walk_cells(coarse, valid, hit, &p, tris, ntris, brute_cell, lists_a, lists_b);
-#endif
+    if (walk_coarse)
+        hit = walk_cells(coarse, valid, hit, &p, tris, ntris, brute_cell, lists_a, lists_b);
     int hit_lane[LANES];
     LANE_STORE(hit, hit_lane);
     for (int j = 0; j < LANES && base + j < nbinned; ++j)
-        out[index[j]] = (uchar)(hit_lane[j] != 0);
+        if ((uint)index[j] < (uint)n)        /* pass 2 filled every slot: the host checked its count */
+            out[index[j]] = (uchar)(hit_lane[j] != 0);
 }
 
 #if LANES == 1
@@ -297,13 +314,14 @@ __kernel void exact_classify(__global const float *binned, int nbinned, __global
  * short and end early (exact.py's module docstring). Arguments as exact_bin_count's, then the walk's; writes out[i]
  * and counts in *behind (zeroed) the points binned in brute_cell. */
 __kernel void exact_classify_points(BIN_ARGS, __global const float *tris, int ntris, __global const int *lists_a,
-                                    __global const int *lists_b, __global int *behind, __global uchar *out)
+                                    __global const int *lists_b, int walk_coarse, __global int *behind,
+                                    __global uchar *out)
 {
     const int i = get_global_id(0);
     if (i >= n)
         return;
     float sx, sy, sz, tmin;
-    const int code = receiver_start(i, points, normals, ox, oy, oz, lx, ly, lz, eps, &sx, &sy, &sz, &tmin);
+    const int code = receiver_start(i, points, normals, ox, oy, oz, lx, ly, lz, eps, with_normals, &sx, &sy, &sz, &tmin);
     if (code != WALK) {
         out[i] = (uchar)code;
         return;
@@ -314,10 +332,8 @@ __kernel void exact_classify_points(BIN_ARGS, __global const float *tris, int nt
         atomic_inc(behind);
     const Packet p = packet(sx, sy, sz, tmin, lx, ly, lz);
     int hit = walk_list(fine, 1, 0, &p, tris, ntris, brute_cell, lists_a, lists_b);
-#if COARSE
-    if (coarse >= 0)
+    if (walk_coarse && coarse >= 0)
         hit = walk_list(coarse, 1, hit, &p, tris, ntris, brute_cell, lists_a, lists_b);
-#endif
     out[i] = (uchar)(hit != 0);
 }
 #endif

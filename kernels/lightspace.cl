@@ -19,8 +19,8 @@
  * LS_COARSE fine cells on either axis puts the primitive in the coarse grid (lightspace.h).
  *
  * Build options: CORNERS, NVIEWS, PERSPECTIVE (lightspace.h).
- * Lists: CSR (ls_count, which also records each primitive's cells as a bit mask, scan_*, then
- * ls_fill_csr, which replays the masks instead of projecting again) or linked (ls_fill_linked).
+ * Lists: CSR (ls_csr's count, which also records each primitive's cells as a bit mask, scan_*, then
+ * ls_csr's fill, which replays the masks instead of projecting again) or linked (ls_fill_linked).
  */
 #include "lightspace.h"
 
@@ -308,78 +308,84 @@ INLINE int ls_overlaps(const Poly *P, int i, int j, int ci0, int cj0, __constant
                 }                                                                            \
     }
 
-/* Count: counts[cell] += 1 for every (primitive, cell) listing. counts: zeroed, one int per cell.
+/* The CSR lists' two passes in one kernel (one compile instead of two on PoCL, where each kernel's
+ * first launch compiles it: the projection below is most of either pass's code). fill = 0 counts,
+ * fill = 1 fills; between them the host takes the prefix sum of counts into offsets.
+ *
+ * Count: counts[cell] += 1 for every (primitive, cell) listing. counts: zeroed, one int per cell.
  * records[p] (int4) remembers the cells for the fill: (first cell, w | h << 8 | view << 16, mask low,
  * mask high) with bit (i - ci0) + (j - cj0) * w set for each listed cell, when the primitive is listed
  * in one view within w x h <= LS_MASK_CELLS candidate cells; x = -1 (fill recomputes) otherwise, and
- * x = -2 when it is listed nowhere. */
-__kernel void ls_count(__global const float *prims, int nprims, __constant const float *views,
-                       __global volatile int *counts, __global int4 *records)
+ * x = -2 when it is listed nowhere.
+ *
+ * Fill: items[offsets[cell] + slot] = p, slot taken by decrementing counts[cell] (which the count
+ * pass left at the cell's length, and which ends at zero, ready for the next count), replaying the
+ * count's mask where it kept one. A listing past its cell's slots (a fill that disagrees with its
+ * count: a bug) is not written but counted in *dropped, which the host checks. Order within a cell is
+ * whatever the atomics give: the exact test does not depend on it. */
+#define LS_PUT(cell, p)                                                                              \
+    {                                                                                                \
+        const int slot_ = atomic_dec(counts + (cell)) - 1;                                           \
+        if (slot_ >= 0)                                                                              \
+            items[offsets[cell] + slot_] = (p);                                                      \
+        else                                                                                         \
+            atomic_inc(dropped);                                                                     \
+    }
+__kernel void ls_csr(__global const float *prims, int nprims, __constant const float *views,
+                     __global volatile int *counts, __global int4 *records, int fill,
+                     __global const int *offsets, __global int *items, __global volatile int *dropped)
 {
     const int p = get_global_id(0);
     if (p >= nprims)
         return;
+    if (fill) {
+        const int4 r = records[p];
+        if (r.x == -2)
+            return;
+        if (r.x >= 0) {
+            /* the count pass kept the cells: walk the mask */
+            const int w = r.y & 255;
+            __constant const float *v = views + VIEW_FLOATS * (r.y >> 16);
+            const int row = (r.x >= VIEW_BASE1(v)) ? VIEW_NX1(v) : VIEW_NX(v);
+            uint bits = (uint)r.z;
+            for (int part = 0; part < 2; ++part) {
+                while (bits) {
+                    const int b = SC_CTZ(bits) + 32 * part;
+                    bits &= bits - 1;
+                    LS_PUT(r.x + (b % w) + (b / w) * row, p)
+                }
+                bits = (uint)r.w;
+            }
+            return;
+        }
+    }
     int first = -2, shape = 0, seen_view = -1;
     uint lo = 0, hi = 0;
     LS_FOR_EACH_CELL(prims, p, views, {
-        atomic_inc(counts + cell);
-        const int w = ci1 - ci0 + 1, h = cj1 - cj0 + 1;
-        if (first == -2 || (first >= 0 && seen_view == view)) {
-            if (w * h <= LS_MASK_CELLS) {
-                if (first == -2) {
-                    first = P.base + cj0 * P.nx + ci0;
-                    shape = w | (h << 8) | (view << 16);
-                    seen_view = view;
+        if (fill) {
+            LS_PUT(cell, p)
+        } else {
+            atomic_inc(counts + cell);
+            const int w = ci1 - ci0 + 1, h = cj1 - cj0 + 1;
+            if (first == -2 || (first >= 0 && seen_view == view)) {
+                if (w * h <= LS_MASK_CELLS) {
+                    if (first == -2) {
+                        first = P.base + cj0 * P.nx + ci0;
+                        shape = w | (h << 8) | (view << 16);
+                        seen_view = view;
+                    }
+                    const int bit = (i - ci0) + (j - cj0) * w;
+                    if (bit < 32) lo |= 1u << bit; else hi |= 1u << (bit - 32);
+                } else {
+                    first = -1;
                 }
-                const int bit = (i - ci0) + (j - cj0) * w;
-                if (bit < 32) lo |= 1u << bit; else hi |= 1u << (bit - 32);
-            } else {
+            } else if (seen_view != view) {
                 first = -1;
             }
-        } else if (seen_view != view) {
-            first = -1;
         }
     })
-    records[p] = (int4)(first, shape, (int)lo, (int)hi);
-}
-
-/* Fill (CSR): items[offsets[cell] + slot] = p, slot taken by decrementing counts[cell] (which the
- * count pass left at the cell's length, and which ends at zero, ready for the next count).
- * Order within a cell is whatever the atomics give: the exact test does not depend on it. */
-__kernel void ls_fill_csr(__global const float *prims, int nprims, __constant const float *views,
-                          __global volatile int *counts, __global const int *offsets, __global int *items,
-                          __global const int4 *records)
-{
-    const int p = get_global_id(0);
-    if (p >= nprims)
-        return;
-    const int4 r = records[p];
-    if (r.x >= 0) {
-        /* the count pass kept the cells: walk the mask */
-        const int w = r.y & 255;
-        __constant const float *v = views + VIEW_FLOATS * (r.y >> 16);
-        const int row = (r.x >= VIEW_BASE1(v)) ? VIEW_NX1(v) : VIEW_NX(v);
-        uint bits = (uint)r.z;
-        for (int part = 0; part < 2; ++part) {
-            while (bits) {
-                const int b = SC_CTZ(bits) + 32 * part;
-                bits &= bits - 1;
-                const int cell = r.x + (b % w) + (b / w) * row;
-                const int slot = atomic_dec(counts + cell) - 1;
-                if (slot >= 0)                   /* never below the cell: count and fill agree */
-                    items[offsets[cell] + slot] = p;
-            }
-            bits = (uint)r.w;
-        }
-        return;
-    }
-    if (r.x == -2)
-        return;
-    LS_FOR_EACH_CELL(prims, p, views, {
-        const int slot = atomic_dec(counts + cell) - 1;
-        if (slot >= 0)
-            items[offsets[cell] + slot] = p;
-    })
+    if (!fill)
+        records[p] = (int4)(first, shape, (int)lo, (int)hi);
 }
 
 /* Fill (linked lists): nodes from an atomic counter; node k is (primitive, next) in nodes[2k..2k+1]
@@ -401,8 +407,8 @@ __kernel void ls_fill_linked(__global const float *prims, int nprims, __constant
     })
 }
 
-/* Exclusive prefix sum in three launches, each work-item scanning a block serially (no local memory,
- * no barriers: DESIGN.md item 13). sums gets one long per block, then the running totals. */
+/* Exclusive prefix sum in two launches, each work-item scanning a block serially (no local memory,
+ * no barriers: DESIGN.md item 13). sums gets one long per block, then the total. */
 __kernel void scan_block_sums(__global const int *counts, int n, int block, __global long *sums)
 {
     const int g = get_global_id(0);
@@ -416,36 +422,31 @@ __kernel void scan_block_sums(__global const int *counts, int n, int block, __gl
     sums[g] = s;
 }
 
-/* One work-item: sums[0..nblocks) -> exclusive running totals; sums[nblocks] = total. */
-__kernel void scan_sums(__global long *sums, int nblocks)
-{
-    if (get_global_id(0) != 0)
-        return;
-    long run = 0;
-    for (int g = 0; g < nblocks; ++g) {
-        const long s = sums[g];
-        sums[g] = run;
-        run += s;
-    }
-    sums[nblocks] = run;
-}
-
-/* offsets[i] = sum of counts[0..i); offsets[n] = total. Valid when the total fits an int (host checks). */
-__kernel void scan_blocks(__global const int *counts, int n, int block, __global const long *sums,
+/* offsets[i] = sum of counts[0..i); offsets[n] = total, and sums[nblocks] = total (long). Work-item g
+ * adds up the block sums before its block itself (at most SCAN_BLOCKS of them: cheaper than a third
+ * kernel, whose first launch alone costs a compile on PoCL). Valid when the total fits an int (host
+ * checks). */
+__kernel void scan_blocks(__global const int *counts, int n, int block, __global long *sums,
                           __global int *offsets, int nblocks)
 {
     const int g = get_global_id(0);
     const int start = g * block;
     if (start >= n)
         return;
+    long before = 0;
+    for (int k = 0; k < g; ++k)
+        before += sums[k];
     const int end = min(n, start + block);
-    int run = (int)sums[g];
+    int run = (int)before;
     for (int i = start; i < end; ++i) {
         offsets[i] = run;
         run += counts[i];
     }
-    if (g == nblocks - 1)
-        offsets[n] = (int)sums[nblocks];
+    if (g == nblocks - 1) {
+        const long total = before + sums[g];
+        offsets[n] = (int)total;
+        sums[nblocks] = total;
+    }
 }
 
 /* Cells of each point (tests and tools): fine[i], coarse[i] cell indices; ws[i] = W (<= 0: behind a

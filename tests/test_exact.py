@@ -10,6 +10,7 @@ tests count those receivers and bound their number.
 import functools
 
 import numpy as np
+import pyopencl as cl
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -135,6 +136,29 @@ def test_linked_list_overflow_gives_the_same_mask(device):
     linked, method = classify(mesh, light, points, normals, device=device, lists="linked", initial_capacity=1)
     assert method.stats["rebuilds"] == 1 and method.lists.capacity >= method.stats["entries"]
     assert np.array_equal(csr, linked)
+
+
+def test_receiver_binning_that_drops_receivers_raises(device, monkeypatch):
+    """The receivers' fill writes only inside its cell's slots and counts what it cannot place; the host
+    raises rather than return a mask with receivers never walked. Driven by cutting pass 1's counts to
+    one per cell, so that every cell holding several receivers overflows."""
+    mesh, points, normals = random_scene(7, True)
+    real = type(device).kernel
+
+    def cut_counts(self, filename, name, options=()):
+        kernel = real(self, filename, name, options)
+        if name != "exact_bin_count":
+            return kernel
+
+        def run(queue, gsize, lsize, *args):
+            kernel(queue, gsize, lsize, *args)
+            counts, cells = args[13], int(args[7]) + 1      # after the 13 BIN_ARGS; brute_cell + 1 cells
+            cl.enqueue_fill_buffer(queue, counts, np.int32(1), 0, 4 * cells)
+        return run
+
+    monkeypatch.setattr(type(device), "kernel", cut_counts)
+    with pytest.raises(RuntimeError, match=r"exact: the receivers' binning met \d+ entries more"):
+        classify(mesh, LIGHTS["point-far"], points, normals, device=device)
 
 
 # Watertightness: rays through shared edges and vertices of a closed mesh ------------------------------

@@ -12,6 +12,7 @@ What is checked, per view and level:
 """
 
 import numpy as np
+import pyopencl as cl
 import pytest
 
 import shadowcl as sc
@@ -207,6 +208,58 @@ def test_prefix_sum_matches_numpy(device, rng, n):
     want = np.concatenate([[0], np.cumsum(counts)])
     assert total == want[-1]
     assert np.array_equal(got, want), f"scan of {n}: first difference at {int(np.argmax(got != want))}"
+
+
+def test_csr_fill_past_a_cells_slots_is_counted_not_written(device, rng):
+    """The fill given one slot per cell (a count too small, as a fill disagreeing with its count would
+    see) writes one listed primitive per non-empty cell, nothing else and nothing past the lists' end,
+    and counts every dropped listing."""
+    corners = np.ascontiguousarray(np.concatenate([soup(rng, 400, 0.05), soup(rng, 5, 0.8)]), dtype=np.float32)
+    _, grid, lists = build(device, sc.PointLight((0.2, 4.0, 0.1)), corners, BOUNDS, cells=3000)
+    offsets, items = lists.to_host(device)
+    lengths = np.diff(offsets)
+    assert lengths.max() > 1                                 # some cells must overflow one slot
+    builder, queue, prims = ls.ListBuilder(device), device.queue, device.to_device(corners)
+    counts, records = device.empty(4 * grid.cells), device.empty(16 * len(corners))
+    cl.enqueue_fill_buffer(queue, counts, np.int32(0), 0, 4 * grid.cells)
+    csr, n = builder._kernel(grid, "ls_csr"), np.int32(len(corners))
+    csr(queue, (n,), None, prims, n, lists.params, counts, records, np.int32(0), counts, counts, counts)   # count
+    tiny = np.minimum(lengths, 1).astype(np.int32)          # capacity 1 per non-empty cell
+    cl.enqueue_copy(queue, counts, tiny)
+    sentinel, canary = -7, 4096
+    out = np.full(len(items) + canary, sentinel, np.int32)
+    out_dev, dropped = device.to_device(out), device.to_device(np.zeros(1, np.int32))
+    csr(queue, (n,), None, prims, n, lists.params, counts, records, np.int32(1), lists.offsets, out_dev, dropped)
+    got = device.from_device(out_dev, len(out), np.int32)
+    assert int(device.from_device(dropped, 1, np.int32)[0]) == int(np.sum(lengths - tiny))
+    first = offsets[:-1][lengths > 0]
+    for cell in np.flatnonzero(lengths > 0):                 # the one written entry is one of the cell's
+        assert got[offsets[cell]] in items[offsets[cell]:offsets[cell + 1]]
+    rest = np.ones(len(out), dtype=bool)
+    rest[first] = False
+    assert np.all(got[rest] == sentinel), "a write went outside the cells' first slots"
+
+
+def test_build_raises_when_the_fill_drops_entries(device, rng, monkeypatch):
+    """The host checks the fill's dropped count: counts cut to one per cell after the count pass make
+    the fill drop listings, and build raises instead of returning incomplete lists."""
+    corners = np.concatenate([soup(rng, 400, 0.05), soup(rng, 5, 0.8)])
+    real = ls.ListBuilder._kernel
+
+    def cut_counts(self, grid, name):
+        kernel = real(self, grid, name)
+        if name != "ls_csr":
+            return kernel
+
+        def run(queue, gsize, lsize, *args):
+            kernel(queue, gsize, lsize, *args)
+            if args[5] == 0:                                  # the count pass: counts are args[3]
+                cl.enqueue_fill_buffer(queue, args[3], np.int32(1), 0, 4 * grid.cells)
+        return run
+
+    monkeypatch.setattr(ls.ListBuilder, "_kernel", cut_counts)
+    with pytest.raises(RuntimeError, match=r"the lists' fill met \d+ entries more than its count"):
+        build(device, sc.PointLight((0.2, 4.0, 0.1)), corners, BOUNDS, cells=3000)
 
 
 def test_views_are_fitted_to_the_light(device):

@@ -37,6 +37,16 @@ receivers on the ground + 200 k on the model, random order, PoCL on 2 cores; ran
   these scenes wrongly), so 'cells' is the default by the sum and the worst case. Lanes: 8 against 1
   on light_inside 95 / 169 ms with normals, 4 lanes 108; 16 crashes PoCL's LLVM 14 ("Do not know how
   to scalarize"), double8 arithmetic miscompiled there (ray_triangle.h's refinement is per lane).
+- Binning without recomputing (2026-12-02): pass 1 keeps each receiver's start (16 bytes, the caller's
+  order), pass 2 scatters only that start and the receiver's index (it found its cell again from the
+  start: a few flops against re-reading float64 points and normals), the walk reads them in order and
+  finds the cells once more. Against the previous fill (which redid the start from the points and
+  normals and scattered 32-byte records), own scene (six perturbed icospheres on a ground slab, 30.7 k
+  triangles, 1.2 M receivers, with normals), per-kernel medians of 7, old / new interleaved under a
+  load average of 11-13 (3 rounds): fill 448 / 172, 330 / 73, 126 / 40 ms; one-shot call 1114 / 852,
+  850 / 407, 365 / 270 ms. Without normals (the old fill re-read only the points) it is a wash: one-shot
+  606 / 597, 626 / 867, 791 / 796 ms (pass 1 pays for writing the starts). Tried and dropped: the walk gathering 32-byte records through the index
+  (no scatter pass): its gathers cost what the scatter saved (149-155 against 146 ms, quiet machine).
 - Watertight against dot5: the same speed within noise (the cull does most of the rejecting); dot5
   leaks on 6-8% of rays aimed at shared edges and vertices, watertight on none.
 - Slivers and long strips (aspect ratios to 1e-4): the float32 edge functions decide inside-ness
@@ -93,7 +103,6 @@ ORDERS = ("cells", "caller")
 BIN_LANES = 8             # receivers per packet in 'cells' order (kernels/vecmath.h LANES)
 DOT5_FLOATS = 16          # kernels/ray_triangle.h
 WT_FLOATS = 16
-RECEIVER_FLOATS = 8       # kernels/exact.cl: a binned receiver's record
 SPLIT_PER_COARSE_CELL = 8.0   # coarse entries per coarse cell above which large triangles are split
 SPLIT_ROUNDS = 4              # rounds of two bisections at most: a piece keeps at least 1/256 of its triangle
 
@@ -203,16 +212,25 @@ class ExactMethod(Method):
         scale = bounds_diagonal(union)
         vertices = (mesh.vertices.astype(np.float64) - origin).astype(np.float32)
         ntris = len(mesh.faces)
+        views = lightspace.fit_views(light, box, origin, scale)
+        # One program for every kernel of this method (its options are known once the views' kind is)
+        options = views.options + (
+            f"-DLIGHT_POINT={int(isinstance(light, PointLight))}",
+            f"-DTEST_DOT5={int(self.test == 'dot5')}",
+            f"-DLISTS_LINKED={int(self.lists_kind == 'linked')}",
+            f"-DINPUT_F64={int(self._fp64)}",
+            f"-DWT_REFINE_F64={int(self._fp64)}",
+            f"-DLANES={BIN_LANES if self.order == 'cells' else 1}",
+        )
         tris_dev = dev.empty(36 * ntris, "triangles")                # (F, 3, 3) float32, gathered on the device
-        dev.kernel("exact.cl", "gather_triangles")(dev.queue, (ntris,), None, dev.to_device(vertices),
-                                                   dev.to_device(mesh.faces), np.int32(ntris), tris_dev)
+        dev.kernel("exact.cl", "gather_triangles", options)(dev.queue, (ntris,), None, dev.to_device(vertices),
+                                                            dev.to_device(mesh.faces), np.int32(ntris), tris_dev)
         if isinstance(light, PointLight):
             light_vec = (light.position - origin).astype(np.float32)
         else:
             light_vec = np.asarray(light.direction, dtype=np.float32)
         t1 = time.perf_counter()
         # Views and grid
-        views = lightspace.fit_views(light, box, origin, scale)
         views = lightspace.fit_to_footprint(dev, views, tris_dev, ntris)
         cells = lightspace.pick_cell_count(ntris, self.expected_receivers)
         grid = lightspace.make_grid(views, cells=cells, resolution=self.resolution)
@@ -225,10 +243,10 @@ class ExactMethod(Method):
         t3 = time.perf_counter()
         if self.test == "dot5":
             records = dev.empty(4 * DOT5_FLOATS * ntris, "dot5 triangle records")
-            dev.kernel("exact.cl", "dot5_records")(dev.queue, (ntris,), None, tris_dev, np.int32(ntris), records)
+            dev.kernel("exact.cl", "dot5_records", options)(dev.queue, (ntris,), None, tris_dev, np.int32(ntris),
+                                                            records)
         else:
             records = dev.empty(4 * WT_FLOATS * ntris, "watertight triangle records")
-            options = (f"-DLIGHT_POINT={int(isinstance(light, PointLight))}",)
             dev.kernel("exact.cl", "wt_records", options)(dev.queue, (ntris,), None, tris_dev, np.int32(ntris),
                                                           *(np.float32(c) for c in light_vec), records)
         dev.queue.finish()
@@ -238,6 +256,7 @@ class ExactMethod(Method):
         self.grid, self.lists, self._tris_dev, self._records = grid, lists, tris_dev, records
         self._light_vec = light_vec
         self._ntris = ntris
+        self._program = options
         self._prepared = True
         self.stats = dict(lists.stats)
         device_bytes = sum(b.size for b in (tris_dev, records, *lists.buffers(), lists.params) if b is not None)
@@ -340,17 +359,6 @@ class ExactMethod(Method):
             cl.enqueue_copy(self.device.queue, items, lists.items, src_offset=4 * (lists.entries - len(items)))
         return items
 
-    def _options(self, normals: bool) -> tuple[str, ...]:
-        return self.grid.options + (
-            f"-DLIGHT_POINT={int(isinstance(self.light, PointLight))}",
-            f"-DNORMALS={int(normals)}",
-            f"-DTEST_DOT5={int(self.test == 'dot5')}",
-            f"-DLISTS_LINKED={int(self.lists_kind == 'linked')}",
-            f"-DINPUT_F64={int(self._fp64)}",
-            f"-DWT_REFINE_F64={int(self._fp64)}",
-            f"-DCOARSE={int(self.lists.coarse_entries != 0)}",
-        )
-
     # classify ------------------------------------------------------------------------------------------
     def classify(self, points, normals=None) -> np.ndarray:
         """Bool (N,) mask of ``points`` ((N, 3) world positions; optional ``normals``), True = in shadow.
@@ -401,32 +409,43 @@ class ExactMethod(Method):
             points_dev = _host_buffer(dev, np.subtract(points, self.origin).astype(np.float32))
             normals_dev = points_dev if normals is None else _host_buffer(dev, normals.astype(np.float32))
         binned = self.order == "cells"
-        options = self._options(normals is not None) + (f"-DLANES={BIN_LANES if binned else 1}",)
+        options = self._program
         brute_cell = self.grid.cells                   # one cell more: the points no view places
         light = [np.float32(c) for c in self._light_vec]
         bin_args = (points_dev, normals_dev, np.int32(n), *origin, self.lists.params, np.int32(brute_cell),
-                    *light, np.float32(self.eps))
+                    *light, np.float32(self.eps), np.int32(normals is not None))
+        walk_coarse = np.int32(self.lists.coarse_entries != 0)
         lists_a, lists_b = self.lists.buffers()
         out_dev = dev.scratch("exact: classify output", n)
         if not binned:
             behind = dev.scratch("exact: points behind the view", 4)
             cl.enqueue_fill_buffer(queue, behind, np.int32(0), 0, 4)
             dev.kernel("exact.cl", "exact_classify_points", options)(
-                queue, (n,), None, *bin_args, self._records, np.int32(self._ntris), lists_a, lists_b, behind, out_dev)
+                queue, (n,), None, *bin_args, self._records, np.int32(self._ntris), lists_a, lists_b, walk_coarse,
+                behind, out_dev)
             return dev.from_device(out_dev, n, np.uint8), int(dev.from_device(behind, 1, np.int32)[0])
         counts = dev.scratch("exact: receiver cell counts", 4 * (brute_cell + 1))
         cl.enqueue_fill_buffer(queue, counts, np.int32(0), 0, 4 * (brute_cell + 1))
         slot = dev.scratch("exact: receiver slots", 4 * n)
-        dev.kernel("exact.cl", "exact_bin_count", options)(queue, (n,), None, *bin_args, counts, slot, out_dev)
+        start = dev.scratch("exact: receiver starts", 16 * n)          # float4 (s, tmin) per receiver
+        dev.kernel("exact.cl", "exact_bin_count", options)(queue, (n,), None, *bin_args, counts, slot, out_dev,
+                                                           start)
         offsets = dev.scratch("exact: receiver cell offsets", 4 * (brute_cell + 2))
         binned_count = self._builder.prefix_sum(self.grid, counts, brute_cell + 1, offsets)
         if binned_count:
-            records = dev.scratch("exact: binned receivers", 4 * RECEIVER_FLOATS * binned_count)
-            dev.kernel("exact.cl", "exact_bin_fill", options)(queue, (n,), None, *bin_args, offsets, slot, records)
+            by_cell = dev.scratch("exact: receiver starts by cell", 16 * binned_count)
+            index = dev.scratch("exact: receiver indices by cell", 4 * binned_count)
+            dropped = dev.scratch("exact: dropped receivers", 4)
+            cl.enqueue_fill_buffer(queue, dropped, np.int32(0), 0, 4)
+            dev.kernel("exact.cl", "exact_bin_fill", options)(queue, (n,), None, np.int32(n), self.lists.params,
+                                                              np.int32(brute_cell), start, slot, offsets, by_cell, index,
+                                                              dropped)
+            lightspace.check_dropped(dev, dropped, "exact: the receivers' binning")
             packets = -(-binned_count // BIN_LANES)
             dev.kernel("exact.cl", "exact_classify", options)(
-                queue, (packets,), None, records, np.int32(binned_count), self._records, np.int32(self._ntris),
-                np.int32(brute_cell), lists_a, lists_b, *light, out_dev)
+                queue, (packets,), None, by_cell, index, np.int32(binned_count), self.lists.params, self._records,
+                np.int32(self._ntris), np.int32(brute_cell), lists_a, lists_b, *light, walk_coarse, np.int32(n),
+                out_dev)
         brute_start = np.empty(1, np.int32)
         cl.enqueue_copy(queue, brute_start, offsets, src_offset=4 * brute_cell)
         return dev.from_device(out_dev, n, np.uint8), binned_count - int(brute_start[0])

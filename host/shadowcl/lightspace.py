@@ -131,6 +131,11 @@ class LightViews:
     def perspective(self) -> bool:
         return self.kind != "orthographic"
 
+    @property
+    def options(self) -> tuple[str, ...]:
+        """Build options shared by every kernel that reads a grid over these views."""
+        return (f"-DNVIEWS={self.nviews}", f"-DPERSPECTIVE={int(self.perspective)}")
+
 
 def fit_views(light, receiver_bounds: np.ndarray, origin: np.ndarray, scale: float,
               max_fov: float = MAX_FOV_DEGREES) -> LightViews:
@@ -256,8 +261,7 @@ class Grid:
     @property
     def options(self) -> tuple[str, ...]:
         """Build options shared by every kernel that reads this grid."""
-        v = self.views
-        return (f"-DNVIEWS={v.nviews}", f"-DPERSPECTIVE={int(v.perspective)}")
+        return self.views.options
 
 
 def _sides(cells: int, aspect: float) -> tuple[int, int]:
@@ -390,7 +394,11 @@ class ListBuilder:
             # and fill would leave slots that the next fill writes past their cell.
             cl.enqueue_fill_buffer(queue, self._counts, np.int32(0), 0, 4 * cells)
             records = dev.empty(16 * max(nprims, 1), "light-space count records")
-            self._kernel(grid, "ls_count")(queue, gsize, None, prims, np.int32(nprims), params, self._counts, records)
+            dropped = dev.scratch("lightspace: dropped entries", 4)
+            cl.enqueue_fill_buffer(queue, dropped, np.int32(0), 0, 4)
+            csr = self._kernel(grid, "ls_csr")
+            csr(queue, gsize, None, prims, np.int32(nprims), params, self._counts, records, np.int32(0), dropped,
+                dropped, dropped)                    # count: the fill's buffers unused
             queue.finish()
             t1 = time.perf_counter()
             offsets = dev.empty(4 * (cells + 1), "light-space offsets")
@@ -401,9 +409,9 @@ class ListBuilder:
                 raise ValueError(f"resolution: the lists need {total} entries, more than {dev.name} holds in one "
                                  f"buffer ({limit}); lower the resolution")
             items = dev.empty(4 * max(total, 1), "light-space lists")
-            self._kernel(grid, "ls_fill_csr")(queue, gsize, None, prims, np.int32(nprims), params,
-                                              self._counts, offsets, items, records)
-            queue.finish()
+            csr(queue, gsize, None, prims, np.int32(nprims), params, self._counts, records, np.int32(1), offsets,
+                items, dropped)
+            check_dropped(dev, dropped, "lightspace: the lists' fill")
             t3 = time.perf_counter()
             lists.offsets, lists.items, lists.entries, lists.capacity = offsets, items, total, total
             fine = np.empty(1, np.int32)
@@ -441,14 +449,22 @@ class ListBuilder:
         dev, queue = self.device, self.device.queue
         block = max(1024, -(-n // SCAN_BLOCKS))
         nblocks = -(-n // block)
-        sums = dev.empty(8 * (nblocks + 1), "scan block sums")
+        sums = dev.scratch("lightspace: scan block sums", 8 * (nblocks + 1))
         args = (counts, np.int32(n), np.int32(block))
         self._kernel(grid, "scan_block_sums")(queue, (nblocks,), None, *args, sums)
-        self._kernel(grid, "scan_sums")(queue, (1,), None, sums, np.int32(nblocks))
         self._kernel(grid, "scan_blocks")(queue, (nblocks,), None, *args, sums, offsets, np.int32(nblocks))
         total = np.empty(1, np.int64)
         cl.enqueue_copy(queue, total, sums, src_offset=8 * nblocks)
         return int(total[0])
+
+
+def check_dropped(device, dropped: cl.Buffer, what: str) -> None:
+    """Raise if a kernel counted writes it dropped in ``dropped`` (one int): a fill meeting more entries
+    than its count gave slots for, which count and fill computing the same cells rule out (a bug)."""
+    count = int(device.from_device(dropped, 1, np.int32)[0])
+    if count:
+        raise RuntimeError(f"{what} met {count} entries more than its count made room for (a bug); "
+                           "nothing was written out of bounds, but the result would be incomplete")
 
 
 def point_cells(device, grid: Grid, points_rel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
