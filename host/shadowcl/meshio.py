@@ -137,7 +137,6 @@ def _byte_set(chars: bytes) -> np.ndarray:
 UNUSUAL_SPACE = b"\x0b\x0c\x1c\x1d\x1e\x1f\x85\xa0"
 FLOAT_BYTES = _byte_set(b"0123456789.+-eE \t\r\n")   # no letters: NumPy and float() differ on 'nan', hex
 INDEX_BYTES = _byte_set(b"0123456789+- \t\r\n")
-DIGITS = _byte_set(b"0123456789")
 FLOAT_MARKS = _byte_set(b".eE")   # what a float has and an int() does not
 
 
@@ -177,6 +176,20 @@ def _non_blank_lines(token_line: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     new_line = np.ones(len(token_line), dtype=bool)
     new_line[1:] = token_line[1:] != token_line[:-1]
     return token_line[new_line], np.flatnonzero(new_line)
+
+
+def _integer_tokens(text: np.ndarray, start: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Per token of ``text`` (``start``: its tokens' first bytes; ``values``: their numbers): written as
+    an integer int() reads (no '.', 'e') and exact in float64."""
+    if not len(values):
+        return np.zeros(0, dtype=bool)
+    token_starts = np.flatnonzero(start)   # a token's bytes run to the next token's start (spaces between)
+    return ~np.logical_or.reduceat(FLOAT_MARKS[text], token_starts) & (np.abs(values) < 2**53)
+
+
+def _list_items(first: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+    """Token indices of rows' lists: ``sizes[i]`` tokens after the token ``first[i]`` (their length)."""
+    return np.repeat(first + 1, sizes) + (np.arange(sizes.sum()) - np.repeat(np.cumsum(sizes) - sizes, sizes))
 
 
 def _read_obj_bulk(data: bytes) -> Polygons | None:
@@ -301,16 +314,15 @@ def _read_off_bulk(data: bytes) -> Polygons | None:
     if nv and sizes_per_line[:nv].min() < 3:
         return None
     vertices = values[vertex_first[:, None] + np.arange(3)]
-    token_starts = np.flatnonzero(start)   # a token's bytes run to the next token's start (spaces between)
-    digits_only = ~np.logical_or.reduceat(~(DIGITS[body] | _is_space(body)), token_starts) if len(values) else start[:0]
-    integer = ~np.logical_or.reduceat(FLOAT_MARKS[body], token_starts) if len(values) else start[:0]
+    integer = _integer_tokens(body, start, values)
     sizes = values[face_first]
-    if not (digits_only[face_first].all() and np.all(sizes < 2**31)
+    signed = np.isin(body[np.flatnonzero(start)[face_first]], np.frombuffer(b"+-", dtype=np.uint8))
+    if not (integer[face_first].all() and not signed.any() and np.all(sizes < 2**31)   # as str.isdigit()
             and np.all(sizes_per_line[nv:] >= sizes + 1)):
         return None
     sizes = sizes.astype(np.int64)
-    used = np.repeat(face_first + 1, sizes) + (np.arange(sizes.sum()) - np.repeat(np.cumsum(sizes) - sizes, sizes))
-    if not (integer[used].all() and np.all(np.abs(values[used]) < 2**53)):   # exact in float64, as int() reads it
+    used = _list_items(face_first, sizes)
+    if not integer[used].all():
         return None
     return _checked(vertices, values[used].astype(np.int64), sizes, lines[2:2 + nv] + 1, lines[2 + nv:] + 1)
 
@@ -524,9 +536,7 @@ def _ply_ascii_bulk(data: bytes, start: int, elements: list, header_lines: int) 
     if values is None:
         return None
     tokens_per_line = np.diff(np.append(first, len(values)))
-    token_starts = np.flatnonzero(start_byte)   # a token's bytes run to the next token's start
-    integer = ~np.logical_or.reduceat(FLOAT_MARKS[body], token_starts) if len(values) else start_byte[:0]
-    integer &= np.abs(values) < 2**53          # exact in float64, as int() reads it
+    integer = _integer_tokens(body, start_byte, values)
 
     def numbers(used, kind):   # the values at token indices ``used``, or None where int() would refuse one
         return values[used] if kind.startswith("f") or integer[used].all() else None
@@ -550,13 +560,12 @@ def _ply_ascii_bulk(data: bytes, start: int, elements: list, header_lines: int) 
             if sizes is None or np.any(sizes < 0) or np.any(row_tokens < sizes + 1):
                 return None
             sizes = sizes.astype(np.int64)
-            used = np.repeat(row_first + 1, sizes) + (np.arange(sizes.sum()) - np.repeat(np.cumsum(sizes) - sizes, sizes))
-            items = numbers(used, kind)
+            items = numbers(_list_items(row_first, sizes), kind)
             if items is None:
                 return None
             items = items if kind.startswith("f") else items.astype(np.int64)
             uniform = len(sizes) and np.all(sizes == sizes[0])
-            rows[element.name] = {name: items.reshape(len(sizes), -1) if uniform else
+            rows[element.name] = {name: items.reshape(len(sizes), sizes[0]) if uniform else
                                   np.split(items, np.cumsum(sizes)[:-1]) if len(sizes) else []}
         else:
             return None
