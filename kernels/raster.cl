@@ -337,7 +337,7 @@ INLINE void draw_polygon(const enum pass pass, global const int *big, const int 
     if (k >= n + (long)big_count * bands)
         return;
     const bool whole = k < n;
-    const int i = whole ? (int)k : big[(k - n) % big_count], band = whole ? 0 : (int)((k - n) / big_count);
+    const int i = whole ? (int)k : big[(k - n) % max(big_count, 1)], band = whole ? 0 : (int)((k - n) / big_count);
     const int count = corner_count[i];
     global const int2 *xy = corner_xy + i * MAX_CORNERS;
     global const float *depth = corner_depth + i * MAX_CORNERS;
