@@ -59,7 +59,18 @@ def test_only_suns_above_the_horizon():
     assert sc.sun_lights(80.0, 0.0, start="2026-12-21", end="2026-12-22") == []    # polar night
 
 
+def test_a_year_in_a_daylight_saving_timezone():
+    """Europe/Paris over 2026: both clock changes crossed, every step one hour of elapsed time (8760),
+    and a naive start in the spring gap (02:30 does not exist) taken as the first time after it."""
+    times = sun_times("2026-01-01", "2027-01-01", "1h", "Europe/Paris")
+    assert len(times) == 8760 and set(np.diff(times.asi8)) == {np.diff(times.asi8)[0]}
+    assert str(times.tz) == "Europe/Paris" and times[0].utcoffset() == pd.Timedelta("1h")
+    assert sun_times("2026-03-29 02:30", "2026-03-29 05:00", "1h", "Europe/Paris")[0].hour == 3
+    assert 4000 < len(sc.sun_lights(48.85, 2.35, start="2026-01-01", end="2027-01-01", timezone="Europe/Paris")) < 4800
+
+
 @pytest.mark.parametrize("call, error, match", [
+    (lambda: sun_times("2026-01-01", "2026-01-02", "1h", "Mars/Base"), ValueError, "timezone"),
     (lambda: sc.sun_lights(91.0, 0.0, start="2026-01-01", end="2026-01-02"), ValueError, "latitude"),
     (lambda: sc.sun_lights(-90.5, 0.0, start="2026-01-01", end="2026-01-02"), ValueError, "latitude"),
     (lambda: sc.sun_lights(10.0, 200.0, start="2026-01-01", end="2026-01-02"), ValueError, "longitude"),
