@@ -2,6 +2,7 @@
 sun-hours command end to end."""
 
 import csv
+import sys
 
 import numpy as np
 import pytest
@@ -179,3 +180,20 @@ def test_sun_hours_command_errors(tmp_path, capsys):
     scene_file.write_text(SENSOR_SCENE + "[[sensors]]\nobjects = ['ground']\nspacing = 1\n")
     assert main(["sun-hours", str(scene_file), "--out", str(tmp_path / "x.png")]) == 2
     assert "pass --lat, --lon, --start, --end" in capsys.readouterr().err
+    site = ["--lat", "10", "--lon", "0", "--start", "2026-01-01", "--end", "2026-01-02", "--out", str(tmp_path / "x.png")]
+    assert main(["sun-hours", str(scene_file), *site, "--spacing", "0"]) == 2      # not the scene's spacing
+    assert "spacing: must be a positive distance, got 0" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("module, extra, options", [
+    ("pvlib", "shadowcl[sun]", []), ("dask.distributed", "shadowcl[distributed]", ["--workers", "1"])])
+def test_sun_hours_command_names_a_missing_extra(module, extra, options, tmp_path, capsys, monkeypatch):
+    """A missing extra: one line naming it, exit 2 (no traceback)."""
+    monkeypatch.setitem(sys.modules, module, None)      # import of a None entry raises ImportError
+    scene_file = tmp_path / "plain.toml"
+    scene_file.write_text(SENSOR_SCENE + "[[sensors]]\nobjects = ['ground']\nspacing = 1\n")
+    args = ["sun-hours", str(scene_file), "--lat", "10", "--lon", "0", "--start", "2026-01-01", "--end", "2026-01-02",
+            "--out", str(tmp_path / "x.png")]
+    assert main(args + options) == 2
+    err = capsys.readouterr().err
+    assert extra in err and err.count("\n") == 1

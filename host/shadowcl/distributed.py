@@ -46,8 +46,7 @@ def pocl_environment(threads: int) -> dict[str, str]:
 def local_cluster(workers: int, threads: int | None = None):
     """A ``LocalCluster`` of ``workers`` processes, one Dask thread each, each PoCL limited to
     ``threads`` threads (default: the cores shared out, at least 1). Close it when done."""
-    from dask.distributed import LocalCluster
-
+    LocalCluster = _dask().LocalCluster
     threads = threads or max(1, (os.cpu_count() or 1) // workers)
     return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
                         env=pocl_environment(threads))
@@ -55,15 +54,21 @@ def local_cluster(workers: int, threads: int | None = None):
 
 def connect(client):
     """A ``dask.distributed.Client`` for ``client`` (a Client, or a scheduler address string)."""
-    try:
-        from dask.distributed import Client
-    except ImportError:
-        raise ImportError("client: Dask distributed is not installed (pip install 'shadowcl[distributed]')") from None
+    Client = _dask().Client
     if isinstance(client, Client):
         return client
     if isinstance(client, str):
         return Client(client)
     raise TypeError(f"client: expected a dask.distributed.Client or a scheduler address, got {type(client).__name__}")
+
+
+def _dask():
+    """``dask.distributed``, or an ImportError that names the extra that brings it."""
+    try:
+        import dask.distributed
+    except ImportError:
+        raise ImportError("client: Dask distributed is not installed (pip install 'shadowcl[distributed]')") from None
+    return dask.distributed
 
 
 def run_on_cluster(job, kind: str, client, progress: bool) -> np.ndarray:

@@ -73,7 +73,10 @@ def write(result: SunHours, png: Path) -> list[Path]:
 def heat_map(points: np.ndarray, hours: np.ndarray, path: Path, title: str, up=UP, north=NORTH) -> None:
     """A PNG of ``hours`` seen from above (north up, east right): each pixel shows the highest sensor
     in it, in a colormap with a colour bar in hours; pixels without a sensor stay blank."""
-    import matplotlib
+    try:
+        import matplotlib
+    except ImportError:
+        raise ImportError("heat map: matplotlib is not installed (pip install 'shadowcl[sun]')") from None
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
