@@ -197,3 +197,18 @@ def test_sun_hours_command_names_a_missing_extra(module, extra, options, tmp_pat
     assert main(args + options) == 2
     err = capsys.readouterr().err
     assert extra in err and err.count("\n") == 1
+
+
+def test_heat_map_is_drawn_with_the_scenes_north(tmp_path, monkeypatch):
+    """north = +x: the result keeps it and the heat map is drawn with it (not the default -z)."""
+    from shadowcl import sunhours
+
+    scene_file = tmp_path / "plain.toml"
+    scene_file.write_text(SENSOR_SCENE + "[[sensors]]\nobjects = ['ground']\nspacing = 1\n")
+    result = sunhours.sun_hours(sc.Scene.load(scene_file), 10.0, 0.0, "2026-01-01 00:00", "2026-01-01 03:00",
+                                north=(1.0, 0.0, 0.0))                  # night: no sun, no shadow work
+    assert result.north == (1.0, 0.0, 0.0)
+    drawn = {}
+    monkeypatch.setattr(sunhours, "heat_map", lambda *args, **kwargs: drawn.update(kwargs))
+    sunhours.write(result, tmp_path / "x.png")
+    assert drawn["north"] == (1.0, 0.0, 0.0)
