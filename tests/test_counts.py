@@ -189,9 +189,10 @@ def test_cluster_run_equals_local_run_and_embree(bar_case, client):
     assert set(client.run(worker_loops).values()) == {0}
 
 
-def test_worker_with_two_threads_runs_batches_one_at_a_time(rng):
+def test_worker_with_two_threads_runs_batches_one_at_a_time(rng, monkeypatch):
     """A worker of 2 Dask threads (a `dask worker`'s default is one per core) shares one loop between
-    them: the counts are the local run's, twice in a row."""
+    them: the counts are the local run's, twice in a row. The client makes no OpenCL device for a
+    cluster run; a bad parameter value comes back from the worker as its named ValueError."""
     distributed = pytest.importorskip("dask.distributed")
     from shadowcl.distributed import pocl_environment
 
@@ -201,8 +202,11 @@ def test_worker_with_two_threads_runs_batches_one_at_a_time(rng):
     local = sc.shadow_counts(mesh, lights, points, normals, batch=1)
     with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=True, dashboard_address=None,
                                   env=pocl_environment(1)) as cluster, distributed.Client(cluster) as client:
+        monkeypatch.setattr("shadowcl.counts.get_device", lambda *args: pytest.fail("a device in the client"))
         for _ in range(2):
             np.testing.assert_array_equal(sc.shadow_counts(mesh, lights, points, normals, batch=1, client=client), local)
+        with pytest.raises(ValueError, match="resolution"):
+            sc.shadow_counts(mesh, lights[:2], points, method="shadow_map", resolution=0, client=client)
 
 
 def test_worker_killed_mid_run_gives_the_same_counts(client, rng):
