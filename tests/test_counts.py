@@ -192,7 +192,8 @@ def test_cluster_run_equals_local_run_and_embree(bar_case, client):
 def test_worker_with_two_threads_runs_batches_one_at_a_time(rng, monkeypatch):
     """A worker of 2 Dask threads (a `dask worker`'s default is one per core) shares one loop between
     them: the counts are the local run's, twice in a row. The client makes no OpenCL device for a
-    cluster run; a bad parameter value comes back from the worker as its named ValueError."""
+    cluster run; a bad parameter value comes back from the worker as its named ValueError; the worker
+    killed mid-run (the only holder of the scattered data) ends the run in a RuntimeError saying why."""
     distributed = pytest.importorskip("dask.distributed")
     from shadowcl.distributed import pocl_environment
 
@@ -207,6 +208,24 @@ def test_worker_with_two_threads_runs_batches_one_at_a_time(rng, monkeypatch):
             np.testing.assert_array_equal(sc.shadow_counts(mesh, lights, points, normals, batch=1, client=client), local)
         with pytest.raises(ValueError, match="resolution"):
             sc.shadow_counts(mesh, lights[:2], points, method="shadow_map", resolution=0, client=client)
+        # the only worker, which holds the scattered data, killed mid-run: a RuntimeError that says why
+        [pid] = client.run(os.getpid).values()
+        outcome = []
+
+        def run():
+            try:
+                sc.shadow_counts(mesh, lights, points, normals, batch=1, client=client)
+            except Exception as error:
+                outcome.append(error)
+        thread = threading.Thread(target=run)
+        thread.start()
+        while thread.is_alive() and not client.run_on_scheduler(lambda dask_scheduler: any(
+                ts.state == "memory" for key, ts in dask_scheduler.tasks.items() if str(key).startswith("shadowcl-"))):
+            time.sleep(0.05)
+        os.kill(pid, signal.SIGKILL)
+        thread.join(120)
+        assert len(outcome) == 1 and isinstance(outcome[0], RuntimeError) and "2 or more workers" in str(outcome[0])
+        client.wait_for_workers(1, timeout=60)    # the nanny's new worker: the cluster then closes at once
 
 
 def test_worker_killed_mid_run_gives_the_same_counts(client, rng):
