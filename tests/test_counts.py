@@ -138,15 +138,16 @@ def bar_case():
 
 
 def check_against_embree(counts, matrix, embree, n):
-    """Each light's mask against Embree's, and the counts against Embree's masks summed: per point, the
-    counts differ from Embree's by at most the lights whose masks differ there (not from our own rows)."""
+    """Each matrix row against Embree's mask of that light, and the counts against Embree's masks summed,
+    each within the bar on its own (not through our matrix: counts = the masks' sum is checked above,
+    test_counts_are_the_sum_of_the_masks, and would make this bound hold by construction)."""
     mine = np.unpackbits(matrix, axis=1, count=n).astype(bool)
     differ = np.count_nonzero(mine != embree, axis=1)
     # The bar: at most 2e-5 of the receivers differ per light (1 of 50,000), float32 Embree vs the exact method.
     assert differ.max() <= 2e-5 * n, f"receivers differing per light: {differ.tolist()}"
-    differ_at_point = np.count_nonzero(mine != embree, axis=0)
-    assert np.all(np.abs(counts - embree.sum(axis=0)) <= differ_at_point)
-    assert np.count_nonzero(counts != embree.sum(axis=0)) <= differ.sum()
+    # The same bar over the counts: in all, at most 2e-5 n per light of count between us and Embree.
+    off = np.abs(counts - embree.sum(axis=0))
+    assert off.sum() <= 2e-5 * n * len(embree), f"counts off Embree's by {off.sum()} in all"
 
 
 def test_counts_match_embree_over_50_lights(bar_case):
