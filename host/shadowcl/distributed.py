@@ -73,12 +73,12 @@ def _dask():
 
 def run_on_cluster(job, kind: str, client, progress: bool) -> np.ndarray:
     """Run a :class:`shadowcl.counts.LightJob`'s batches on the cluster of ``client``; the local run's result."""
-    from distributed.client import FutureCancelledError
-
     if isinstance(client, str):                      # a client of our own, closed when done
         with connect(client) as own:
             return run_on_cluster(job, kind, own, progress)
-    client = connect(client)
+    client = connect(client)                         # first: its ImportError names the extra
+    from distributed.client import FutureCancelledError
+
     run = uuid.uuid4().hex
     try:
         return _run(job, kind, client, progress, run)
