@@ -112,6 +112,19 @@ def test_pairwise_sum_is_the_level_by_level_tree(parts):
     assert tree.total() == level[0]
 
 
+def test_receivers_are_framed_once_per_loop(rng, monkeypatch):
+    """The loop frames its receivers once, not once per light (a float64 N x 3 copy each); the counts
+    are still the per-light masks' sum (test_counts_are_the_sum_of_the_masks)."""
+    from shadowcl.frame import Frame
+
+    calls = []
+    framed = Frame.receivers
+    monkeypatch.setattr(Frame, "receivers", lambda self, receivers: calls.append(1) or framed(self, receivers))
+    points, normals = receivers(rng, 500)
+    sc.shadow_counts(csg_scene(), directional_lights(rng, 4), points, normals, batch=2)
+    assert len(calls) == 1
+
+
 def test_no_points():
     counts = sc.shadow_counts(csg_scene(), [sc.DirectionalLight((0, -1, 0))], np.zeros((0, 3)))
     assert counts.shape == (0,)
