@@ -222,7 +222,7 @@ def main(argv=None) -> int:
         if args.command == "devices":
             return run_devices()
         return run_methods()
-    except (ValueError, TypeError, OSError, RuntimeError, MemoryError) as error:
+    except (ValueError, TypeError, OSError, RuntimeError, MemoryError, ImportError) as error:   # ImportError: a missing extra, named
         # one line, even for a message that lists things (the devices, say) on lines of its own
         message = "; ".join(line.strip() for line in str(error).splitlines() if line.strip()).replace(":; ", ": ")
         print(f"shadowcl: error: {message}", file=sys.stderr)

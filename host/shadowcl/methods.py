@@ -79,13 +79,19 @@ class Method(abc.ABC):
     eps_meaning: str | None = "as DESIGN.md: the segment starts eps along the normal and ignores hits within eps"
 
     def __init__(self, device, **params):
-        unknown = sorted(set(params) - set(self.parameters))
-        if unknown:
-            raise TypeError(f"{', '.join(unknown)}: not a parameter of method {self.name!r}; "
-                            f"it takes {sorted(self.parameters)}")
+        self.check_parameter_names(params)
         self.device = device
         self.params = {key: params.get(key, default) for key, (default, _) in self.parameters.items()}
         self.stats: dict = {}
+
+    @classmethod
+    def check_parameter_names(cls, params) -> None:
+        """``TypeError`` naming the ``params`` the method does not take (no device needed; their values
+        are checked by the constructor, which some methods give a device to read)."""
+        unknown = sorted(set(params) - set(cls.parameters))
+        if unknown:
+            raise TypeError(f"{', '.join(unknown)}: not a parameter of method {cls.name!r}; "
+                            f"it takes {sorted(cls.parameters)}")
 
     @abc.abstractmethod
     def prepare(self, occluders, light, receiver_bounds, eps: float) -> None:
