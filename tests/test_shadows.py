@@ -271,3 +271,12 @@ def test_receiver_bounds_at_every_size(rng, count):
     points[count // 2, 1] = np.nan
     with pytest.raises(ValueError, match=rf"points: contains NaN or inf \(first at index {count // 2}\)"):
         check_points(points)
+
+
+def test_an_empty_subset_with_normals_has_empty_unit_normals():
+    """Points.unit_normals on an empty subset that has normals: (0, 3), not a TypeError (sqrt of None)."""
+    from shadowcl.points import check_points
+    receivers = check_points(np.zeros((3, 3)), np.tile([0.0, 2.0, 0.0], (3, 1)))
+    empty = receivers.subset(np.zeros(3, dtype=bool))
+    assert empty.unit_normals().shape == (0, 3)
+    assert empty.facing_away(sc.PointLight((0, 1, 0))).shape == (0,)

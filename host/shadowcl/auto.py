@@ -286,7 +286,7 @@ class AutoMethod(Method):
         if not outside.any():
             return self.chosen.classify(receivers)
         answer = self._exact.classify(receivers) if outside.all() else np.empty(len(receivers), dtype=bool)
-        if not outside.all():      # (an empty subset with normals trips Points.unit_normals: not asked)
+        if not outside.all():
             answer[~outside] = self.chosen.classify(receivers.subset(~outside))
             answer[outside] = self._exact.classify(receivers.subset(outside))
         return answer

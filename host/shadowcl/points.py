@@ -60,8 +60,10 @@ class Points:
     # A frozen dataclass still takes cached properties: the cache writes the instance's __dict__.
     @cached_property
     def _checked(self) -> tuple:
-        if self.normals is None or len(self) == 0:
-            return self.normals, None
+        if self.normals is None:
+            return None, None
+        if len(self) == 0:
+            return self.normals, np.ones(0)
         length2 = _squared_lengths(self.normals)
         if not (length2.min() > 0 and np.isfinite(length2.max())):
             return _bad_normals(self.normals, length2)
