@@ -1,4 +1,6 @@
-/* lists.h: the one segmented sort of the device lists (voxel's cell lists, angular's rows and loops).
+/* lists.h: the device lists' shared mechanisms: the exclusive prefix sum of per-segment counts (host side
+ * shadowcl.lists.prefix_sum; a program that includes this header has its kernels) and the one segmented
+ * sort (voxel's cell lists, angular's rows and loops).
  *
  * One work-item sorts one segment in place, without scratch. SC_DEFINE_SEGMENT_SORT(name, SEGMENT,
  * CONTEXT, BEFORE, SWAP) defines
@@ -16,6 +18,48 @@
 #define SHADOWCL_LISTS_H
 
 #include "vecmath.h"
+
+/* Exclusive prefix sum in two launches, each work-item scanning a block serially (no local memory,
+ * no barriers: DESIGN.md item 13). sums gets one long per block, then the total. */
+__kernel void scan_block_sums(__global const int *counts, int n, int block, __global long *sums)
+{
+    const int g = get_global_id(0);
+    const int start = g * block;
+    if (start >= n)
+        return;
+    const int end = min(n, start + block);
+    long s = 0;
+    for (int i = start; i < end; ++i)
+        s += counts[i];
+    sums[g] = s;
+}
+
+/* offsets[i] = sum of counts[0..i); offsets[n] = total, and sums[nblocks] = total (long). Work-item g
+ * adds up the block sums before its block itself (at most SCAN_BLOCKS of them: cheaper than a third
+ * kernel, whose first launch alone costs a compile on PoCL). Valid when the total fits an int (host
+ * checks). */
+__kernel void scan_blocks(__global const int *counts, int n, int block, __global long *sums,
+                          __global int *offsets, int nblocks)
+{
+    const int g = get_global_id(0);
+    const int start = g * block;
+    if (start >= n)
+        return;
+    long before = 0;
+    for (int k = 0; k < g; ++k)
+        before += sums[k];
+    const int end = min(n, start + block);
+    int run = (int)before;
+    for (int i = start; i < end; ++i) {
+        offsets[i] = run;
+        run += counts[i];
+    }
+    if (g == nblocks - 1) {
+        const long total = before + sums[g];
+        offsets[n] = (int)total;
+        sums[nblocks] = total;
+    }
+}
 
 #define SC_SORT_SHORT 16
 
