@@ -472,7 +472,7 @@ INLINE void write_pair(__global float *out, const __global float *ca, const __gl
 
 /* pair_rows: one work-item per row. Sorts the row's crossings by (region, kind, s) and pairs each lit
  * region's ridge crossings by section 4's rule: in s order, a crossing going the way the region's first
- * one goes (or anc_y while none waits) waits; one going the other way pairs with the oldest waiting (first
+ * one goes (or any while none waits) waits; one going the other way pairs with the oldest waiting (first
  * in, first out), so the chains leaving a local theta peak bound one span and coils pair correctly; a
  * region's outer loop and its holes pair together (a torus lit from above: its hole stays lit). Each pair
  * is then cut at the region's crease duplicates inside it (section 5): A h1, h1 h2, ..., hn B.

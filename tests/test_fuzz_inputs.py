@@ -349,3 +349,175 @@ def test_nesting_is_bounded_with_the_key_path(tmp_path, depth, inline):
     message = str(error.value)
     assert message.startswith(f"{path}: ")
     assert ("objects[0]" in message and "CSG nested more than 64 deep" in message) or "too deep for the TOML parser" in message
+
+
+# ---- the bulk OBJ path against the line parser: the same polygons or the same error on every file ----
+
+OBJ_HOSTILE = ["0", "1e", "1.2.3", "nan", "inf", "-", "+", "/2", "99999999999999999999", "9223372036854775807",
+               "1_0", "0x1p3", "1\r", "\xa0", "é", "1e39", "12345678901234567890123", "-9"]
+
+
+def obj_records(hostile: bool):
+    """Records of plain tokens (which the bulk path reads), or of plain tokens now and then a hostile one."""
+    def records(keywords, good):
+        tokens = st.sampled_from(good * 10 + OBJ_HOSTILE if hostile else good)
+        return st.tuples(st.sampled_from(keywords), st.lists(tokens, min_size=3, max_size=5),
+                         st.sampled_from([" ", "\t", "  "]))
+
+    others = ["vt", "vn", "#", "o", ""] + ([" v", "\tf", "v\r", "f\r"] if hostile else [])
+    return st.lists(st.one_of(records(["v"], ["1", "-1", "2", "+2", "3", "1.5", "-.5e3"]),
+                              records(["f"], ["1", "2", "3", "-1", "-2", "-3", "+2", "1/2/3", "1//2", "-2/1", "2/x"]),
+                              records(others, ["1", "a"])), max_size=12)
+
+
+@settings(max_examples=300, deadline=5000, derandomize=True, database=None)
+@given(records=st.one_of(obj_records(False), obj_records(True)), newline=st.sampled_from(["\n", "\r\n"]))
+def test_bulk_obj_agrees_with_the_line_parser(records, newline):
+    """Files of valid and hostile OBJ records: the bulk reader (which hands what it declines to the line
+    parser) gives the line parser's polygons or its exact error message."""
+    from shadowcl import meshio
+
+    data = newline.join(keyword + separator + separator.join(tokens)
+                        for keyword, tokens, separator in records).encode("latin-1")
+
+    def outcome(read):
+        try:
+            polygons = read(data)
+        except ValueError as error:
+            return str(error)
+        return polygons.vertices.tolist(), polygons.corners.tolist(), polygons.sizes.tolist()
+
+    assert outcome(meshio._read_obj) == outcome(meshio._read_obj_by_line)
+
+
+def test_bulk_obj_reads_the_common_forms():
+    """The bulk path itself (not the line parser) reads slashes, negative indices, extra vertex values,
+    tabs, CRLF, comments and blank lines, so the agreement test above compares two parsers."""
+    from shadowcl import meshio
+
+    data = (b"# comment \xe9\r\nmtllib a.mtl\r\nv 0 0 0 1\r\nv\t1 0 0 0.5 0.5 0.5\r\nv 0 1 0\r\n\r\n   \r\n"
+            b"vt 0 0\r\nvn 0 0 1\r\nf 1/1/1 2//1 3\r\nv 1 1 0\r\nf -1 -2 -3 1/1\r\ns off\r\n")
+    polygons = meshio._read_obj_bulk(data)
+    assert polygons is not None
+    assert polygons.vertices.tolist() == [[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]]
+    assert polygons.corners.tolist() == [0, 1, 2, 3, 2, 1, 0] and polygons.sizes.tolist() == [3, 4]
+
+
+OFF_GOOD_VERTEX = ["0", "1", "-1.5", "2e-1", "+3"]
+
+
+@settings(max_examples=300, deadline=5000, derandomize=True, database=None)
+@given(counts=st.tuples(st.integers(0, 4), st.integers(0, 4)), data=st.data(),
+       extra=st.sampled_from(["", "0", "x"]), hostile=st.booleans(), newline=st.sampled_from(["\n", "\r\n"]))
+def test_bulk_off_agrees_with_the_line_parser(counts, data, extra, hostile, newline):
+    """OFF files of plain and hostile rows (counts off by one, sizes past the row, floats as indices,
+    colours after a face, blank lines, comments): the bulk reader gives the line parser's outcome."""
+    from shadowcl import meshio
+
+    nv, nf = counts
+    bad = OFF_HOSTILE if hostile else []
+    rows = [" ".join(data.draw(st.lists(st.sampled_from(OFF_GOOD_VERTEX * 10 + bad), min_size=3 - hostile, max_size=5)))
+            for _ in range(nv + data.draw(st.sampled_from([-1, 0, 0, 0, 1])) * hostile)]
+    for _ in range(nf):
+        size = data.draw(st.sampled_from([3, 3, 4] + ([0, 5, "+3", "3.0"] if hostile else [])))
+        length = data.draw(st.integers(3, 4)) if hostile else size   # hostile: maybe not the row's size
+        good = [str(i) for i in range(nv)] if nv and not hostile else ["0", "1", "2", "3"]
+        corners = data.draw(st.lists(st.sampled_from(good * 10 + bad), min_size=length, max_size=length))
+        rows.append(" ".join([str(size)] + corners + data.draw(st.sampled_from([[], ["0.5", "1", "0"]]))))
+    if hostile and rows:
+        rows.insert(data.draw(st.integers(0, len(rows))), data.draw(st.sampled_from(["", "  ", "", "# note"])))
+    text = newline.join(["OFF", f"{nv} {nf} {extra}".strip()] + rows) + newline
+
+    def outcome(read):
+        try:
+            polygons = read(text.encode("latin-1"))
+        except ValueError as error:
+            return str(error)
+        return polygons.vertices.tolist(), polygons.corners.tolist(), polygons.sizes.tolist()
+
+    assert outcome(meshio._read_off) == outcome(meshio._read_off_by_line)
+    if not hostile:   # the bulk path itself reads plain files
+        try:
+            assert meshio._read_off_bulk(text.encode("latin-1")) is not None
+        except ValueError:
+            pass   # the bulk path itself found the problem (an index past the vertices)
+
+
+OFF_HOSTILE = ["1e", "nan", "-", "1.0", "-1", "99999999999999999999", "a", "1_0", "\xa0"]
+
+
+STL_HOSTILE_LINES = ["VERTEX 1 2 3", "vertex 1 2", "vertex 1 2 3 4", "vertex 1 nan 2", "vertex 1 1e 2", "vertexx 1 2 3",
+                     "endfacet", "bogus", "vertex 1\xa02 3", "vertex 0x1 2 3"]
+
+
+@settings(max_examples=200, deadline=5000, derandomize=True, database=None)
+@given(facets=st.lists(st.lists(st.tuples(st.sampled_from(["0", "1", "-2.5", "3e-2", "+4"]), st.sampled_from(["", "  ", "\t"])),
+                                min_size=3, max_size=3), max_size=4),
+       hostile=st.lists(st.tuples(st.integers(1, 40), st.sampled_from(STL_HOSTILE_LINES)), max_size=2),
+       newline=st.sampled_from(["\n", "\r\n"]))
+def test_bulk_ascii_stl_agrees_with_the_line_parser(facets, hostile, newline):
+    """ASCII STL files of plain facets (indented or not) with now and then a hostile line: the bulk reader
+    gives the line parser's outcome, and reads the plain ones itself."""
+    from shadowcl import meshio
+
+    lines = ["solid fuzz"]
+    for corners in facets:
+        lines += ["facet normal 0 0 1", " outer loop"]
+        lines += [f"{indent}vertex {x} {x} 1" for x, indent in corners]
+        lines += [" endloop", "endfacet"]
+    lines.append("endsolid fuzz")
+    for at, line in hostile:
+        lines.insert(min(at, len(lines)), line)
+    data = newline.join(lines).encode("latin-1")
+
+    def outcome(read):
+        try:
+            polygons = read(data)
+        except ValueError as error:
+            return str(error)
+        return polygons.vertices.tolist(), polygons.corners.tolist(), polygons.sizes.tolist()
+
+    assert outcome(meshio._read_stl) == outcome(meshio._read_ascii_stl_by_line)
+    if not hostile and facets:
+        assert meshio._read_ascii_stl_bulk(data) is not None
+
+
+PLY_HOSTILE = ["1.0", "-1", "1e", "nan", "a", "+2", "99999999999999999999", "\xa0"]
+
+
+@settings(max_examples=200, deadline=5000, derandomize=True, database=None)
+@given(nv=st.integers(0, 4), nf=st.integers(0, 3), flag=st.booleans(), hostile=st.booleans(), data=st.data())
+def test_bulk_ascii_ply_agrees_with_the_line_parser(nv, nf, flag, hostile, data):
+    """ASCII PLY files (x y z, maybe an int property; faces of a list) of plain and hostile rows (short
+    rows, lists longer than their row, floats as indices, row counts off by one): the bulk reader gives
+    the line parser's outcome, and reads the plain ones itself."""
+    from unittest import mock
+
+    from shadowcl import meshio
+
+    bad = PLY_HOSTILE if hostile else []
+    number, integer = st.sampled_from(["0", "1", "-2.5", "3e-1"] * 40 + bad), st.sampled_from(["0", "-3", "7"] * 40 + bad)
+    vertex = st.tuples(number, number, number, integer if flag else st.just(""), st.sampled_from(["", "", "5"]))
+    rows = [" ".join(data.draw(vertex)).strip() for _ in range(nv + hostile * data.draw(st.sampled_from([0, 0, -1, 1])))]
+    for _ in range(nf):
+        corners = data.draw(st.lists(st.sampled_from([str(i) for i in range(max(nv, 1))] * 40 + bad), min_size=3, max_size=4))
+        size = str(len(corners) + hostile * data.draw(st.sampled_from([0, 0, 1, -1])))
+        rows.append(" ".join([data.draw(st.sampled_from([size] * 10 + bad))] + corners))
+    header = ["ply", "format ascii 1.0", f"element vertex {nv}", "property float x", "property float y",
+              "property float z"] + (["property int flag"] if flag else []) + [
+              f"element face {nf}", "property list uchar int vertex_indices", "end_header"]
+    data_bytes = "\n".join(header + rows + [""]).encode("latin-1")
+
+    def outcome():
+        try:
+            polygons = meshio._read_ply(data_bytes)
+        except ValueError as error:
+            return str(error)
+        return polygons.vertices.tolist(), polygons.corners.tolist(), polygons.sizes.tolist()
+
+    real, bulk_results = meshio._ply_ascii_bulk, []
+    with mock.patch.object(meshio, "_ply_ascii_bulk", lambda *args: bulk_results.append(real(*args)) or bulk_results[-1]):
+        with_bulk = outcome()
+    with mock.patch.object(meshio, "_ply_ascii_bulk", lambda *args: None):
+        assert with_bulk == outcome()
+    assert hostile or bulk_results[0] is not None   # the bulk path itself reads plain files

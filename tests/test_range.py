@@ -258,7 +258,8 @@ def test_huge_eps_is_honoured_by_the_shadow_map_and_refused_by_voxel(scene):
 PLACEMENTS = ("above", "far", "very far", "on a vertex", "near a face", "inside", "directional")
 
 
-@settings(max_examples=24, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=24, deadline=None, derandomize=True, database=None,
+          suppress_health_check=[HealthCheck.too_slow])
 @given(method=st.sampled_from(METHODS), occluder=st.sampled_from(("sphere", "box_minus_sphere")),
        log_scale=st.floats(-12.0, 15.0), offset=st.floats(-1e3, 1e3), placement=st.sampled_from(PLACEMENTS),
        seed=st.integers(0, 2 ** 16), normals=st.booleans(), far_receivers=st.booleans())
@@ -293,4 +294,12 @@ def test_fuzz_right_or_a_clear_error(method, occluder, log_scale, offset, placem
     try:
         assert_right(method, mesh, light, pts, nrm, what=f"{placement} x{scale:.3g} +{shift:.3g}")
     except ValueError as error:
-        assert str(error).split(":")[0] in ("light", "points", "scene_or_mesh"), error
+        # A refusal only where a rule of the working range allows one (README "Working range"): a light on,
+        # near or inside the occluders for the methods that declare a clearance or refuse a light inside;
+        # far receivers of a point light used as directional beyond the method's reach.
+        allowed = set()
+        if method in ("angular", "shadow_volume") and placement in ("on a vertex", "near a face", "inside"):
+            allowed.add("light")
+        if far_receivers and placement in ("far", "very far"):
+            allowed.add("points")
+        assert str(error).split(":")[0] in allowed, error

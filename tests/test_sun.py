@@ -101,6 +101,19 @@ def test_city_block_scene_has_its_site_and_sensor_grids():
     assert len(grids[1].points) > 1000 and grids[1].points[:, 1].min() > 1   # on the roofs, none on the ground
 
 
+def test_a_spacing_too_fine_to_fit_is_refused_before_allocating():
+    """1e-5 m over the city block's 200 m ground (a 2e7 x 2e7 lattice, terabytes) is a ValueError naming
+    spacing and the count, from the grid itself and through a scene's sensors; a fine grid that fits is kept."""
+    scene = sc.Scene.load(SCENES / "city_block.toml")
+    with pytest.raises(ValueError, match=r"spacing: 1e-05 puts [0-9.]+e\+14 lattice points"):
+        scene_sensors(scene, spacing=1e-5)
+    ground = dict(scene.objects)[scene.sensors[0]["objects"][0]]
+    with pytest.raises(ValueError, match=r"spacing: 1e-05 puts [0-9.]+e\+14 lattice points"):
+        grid_on_faces([ground], 1e-5)
+    small = sc.Mesh(ground.vertices * np.float32(0.05), ground.faces)    # 10 m at 5 cm: fits
+    assert len(grid_on_faces([small], 5e-2)[0]) == 201 * 201
+
+
 SENSOR_SCENE = """
 [[lights]]
 type = "directional"

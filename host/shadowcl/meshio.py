@@ -10,6 +10,7 @@ every polygon needs at least three corners, each a valid vertex index.
 from __future__ import annotations
 
 import os
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -30,6 +31,8 @@ class Polygons:
 
     def triangles(self) -> np.ndarray:
         """(T, 3) int64: each polygon fan-triangulated from its first corner."""
+        if np.all(self.sizes == 3):   # triangles already (most files): no fan to build
+            return self.corners.reshape(-1, 3)
         starts = np.cumsum(self.sizes) - self.sizes
         fans = self.sizes - 2
         first = np.repeat(starts, fans)
@@ -120,6 +123,133 @@ def _checked(vertices: np.ndarray, corners: np.ndarray, sizes: np.ndarray, verte
 
 
 def _read_obj(data: bytes) -> Polygons:
+    bulk = _read_obj_bulk(data)
+    return bulk if bulk is not None else _read_obj_by_line(data)
+
+
+def _byte_set(chars: bytes) -> np.ndarray:
+    table = np.zeros(256, dtype=bool)
+    table[list(chars)] = True
+    return table
+
+
+# the other bytes str.split() takes for whitespace in Latin-1: a file holding one goes to the line parser
+UNUSUAL_SPACE = b"\x0b\x0c\x1c\x1d\x1e\x1f\x85\xa0"
+FLOAT_BYTES = _byte_set(b"0123456789.+-eE \t\r\n")   # no letters: NumPy and float() differ on 'nan', hex
+INDEX_BYTES = _byte_set(b"0123456789+- \t\r\n")
+FLOAT_MARKS = _byte_set(b".eE")   # what a float has and an int() does not
+
+
+def _is_space(text: np.ndarray) -> np.ndarray:
+    """Space, tab, CR or LF, per byte (comparisons: faster than a table lookup on megabytes)."""
+    return (text == 32) | (text == 10) | (text == 9) | (text == 13)
+
+
+def _has_unusual_space(data: bytes) -> bool:
+    return any(byte in data for byte in UNUSUAL_SPACE)
+
+
+def _bulk_numbers(text: np.ndarray, dtype, count: int) -> np.ndarray | None:
+    """The ``count`` whitespace-separated numbers of ``text`` (uint8), or None unless NumPy reads exactly
+    ``count`` numbers to the end."""
+    if count == 0:
+        return np.zeros(0, dtype=dtype)   # NumPy reads a blank text as [-1]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DeprecationWarning)   # NumPy's word for "stopped at a bad token"
+        try:
+            values = np.fromstring(text.tobytes(), dtype=dtype, sep=" ")
+        except (ValueError, DeprecationWarning):
+            return None
+    return values if len(values) == count else None
+
+
+def _tokens(text: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Start of every whitespace-separated token of ``text`` (uint8, lines ending in newline) as a
+    boolean per byte, and the line (counted within ``text``) of each token."""
+    space = _is_space(text)
+    start = ~space & np.concatenate([[True], space[:-1]])
+    return start, np.searchsorted(np.flatnonzero(text == 10), np.flatnonzero(start))
+
+
+def _non_blank_lines(token_line: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The lines holding tokens (given each token's line, in order) and the index of each one's first token."""
+    new_line = np.ones(len(token_line), dtype=bool)
+    new_line[1:] = token_line[1:] != token_line[:-1]
+    return token_line[new_line], np.flatnonzero(new_line)
+
+
+def _integer_tokens(text: np.ndarray, start: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Per token of ``text`` (``start``: its tokens' first bytes; ``values``: their numbers): written as
+    an integer int() reads (no '.', 'e') and exact in float64."""
+    if not len(values):
+        return np.zeros(0, dtype=bool)
+    token_starts = np.flatnonzero(start)   # a token's bytes run to the next token's start (spaces between)
+    return ~np.logical_or.reduceat(FLOAT_MARKS[text], token_starts) & (np.abs(values) < 2**53)
+
+
+def _list_items(first: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+    """Token indices of rows' lists: ``sizes[i]`` tokens after the token ``first[i]`` (their length)."""
+    return np.repeat(first + 1, sizes) + (np.arange(sizes.sum()) - np.repeat(np.cumsum(sizes) - sizes, sizes))
+
+
+def _read_obj_bulk(data: bytes) -> Polygons | None:
+    """The polygons of an OBJ file whose 'v' and 'f' records are plain numbers, parsed in bulk; None
+    when a record needs the line parser (which then reads the unusual form or names the problem), so
+    both give the same result on every file."""
+    text = np.frombuffer(data + b"\n", dtype=np.uint8)
+    if _has_unusual_space(data):
+        return None
+    ends = np.flatnonzero(text == 10)
+    starts = np.concatenate([[0], ends[:-1] + 1])
+    first, second = text[starts], text[np.minimum(starts + 1, len(text) - 1)]
+    keyed = (ends - starts >= 2) & _is_space(second)
+    is_vertex, is_face = keyed & (first == ord("v")), keyed & (first == ord("f"))
+    if np.any((ends - starts == 1) & np.isin(first, (ord("v"), ord("f")))):
+        return None   # a bare keyword
+    blank_start = np.flatnonzero(_is_space(first) & (ends > starts))
+    if any(data[starts[line]:ends[line]].strip() for line in blank_start):
+        return None   # a record after whitespace
+    kind = np.zeros(len(starts), dtype=np.int8)
+    kind[is_vertex], kind[is_face] = 1, 2
+    line_kind = np.repeat(kind, ends - starts + 1)
+    work = text.copy()
+    work[starts[keyed]] = ord(" ")   # the keyword
+
+    vertex_text = work[line_kind == 1]
+    if not FLOAT_BYTES[vertex_text].all():
+        return None
+    _, token_line = _tokens(vertex_text)
+    counts = np.bincount(token_line, minlength=np.count_nonzero(is_vertex))
+    values = _bulk_numbers(vertex_text, np.float64, len(token_line))
+    if values is None or (len(counts) and counts.min() < 3):
+        return None
+    first_three = (np.cumsum(counts) - counts)[:, None] + np.arange(3)   # extra numbers (w, colour) dropped
+    vertices = values[first_three]
+
+    face_text = work[line_kind == 2]
+    start, token_line = _tokens(face_text)
+    slash = face_text == ord("/")
+    if slash.any():   # "v/vt/vn": keep v, blank the rest of the token
+        slashes = np.cumsum(slash, dtype=np.int32)
+        slashes_before = np.concatenate([[0], (slashes - slash)[start]])   # per token; 0 before the first
+        after_slash = slashes - slashes_before[np.cumsum(start, dtype=np.int32)] > 0
+        face_text[after_slash & ~_is_space(face_text)] = ord(" ")
+    if not INDEX_BYTES[face_text].all():
+        return None
+    indices = _bulk_numbers(face_text, np.int64, len(token_line))
+    limits = np.iinfo(np.int64)
+    if indices is None or np.isin(indices, (limits.min, limits.max)).any():
+        return None   # a missing vertex index, or one NumPy clipped to 64 bits
+    sizes = np.bincount(token_line, minlength=np.count_nonzero(is_face))
+    vertices_before = np.repeat(np.cumsum(is_vertex)[is_face], sizes)
+    if np.any((indices == 0) | (-indices > vertices_before)):
+        return None
+    corners = np.where(indices > 0, indices - 1, vertices_before + indices)
+    return _checked(vertices, corners, sizes, np.flatnonzero(is_vertex) + 1, np.flatnonzero(is_face) + 1,
+                    index_base=1)
+
+
+def _read_obj_by_line(data: bytes) -> Polygons:
     vertices, vertex_lines, corners, sizes, polygon_lines = [], [], [], [], []
     for number, line in enumerate(_lines(data), 1):
         parts = line.split()
@@ -149,6 +279,55 @@ def _read_obj(data: bytes) -> Polygons:
 
 
 def _read_off(data: bytes) -> Polygons:
+    bulk = _read_off_bulk(data)
+    return bulk if bulk is not None else _read_off_by_line(data)
+
+
+def _read_off_bulk(data: bytes) -> Polygons | None:
+    """The polygons of an OFF file without comments, its header and counts on lines of their own, parsed
+    in bulk; None when the line parser must read it or name its problem (both agree on every file)."""
+    if b"#" in data:
+        return None
+    text = np.frombuffer(data + b"\n", dtype=np.uint8)
+    if _has_unusual_space(data):
+        return None
+    start, token_line = _tokens(text)
+    lines, first = _non_blank_lines(token_line)
+    if len(lines) < 2 or first[1] != 1:     # the header alone on its line, then the counts
+        return None
+    ends = np.flatnonzero(text == 10)
+    keyword, *counts = data[:ends[lines[1]]].decode("latin-1").split()
+    if not (keyword.isalpha() and keyword.endswith("OFF")) or len(counts) < 2 or not all(c.isdigit() for c in counts[:2]):
+        return None
+    nv, nf = int(counts[0]), int(counts[1])
+    if nv + nf != len(lines) - 2:
+        return None
+    body = text[ends[lines[1]] + 1:]
+    if not FLOAT_BYTES[body].all():
+        return None
+    start, first = start[ends[lines[1]] + 1:], first[2:] - (1 + len(counts))   # body tokens from 0
+    values = _bulk_numbers(body, np.float64, np.count_nonzero(start))
+    if values is None:
+        return None
+    sizes_per_line = np.diff(np.append(first, len(values)))          # tokens on each line
+    vertex_first, face_first = first[:nv], first[nv:]
+    if nv and sizes_per_line[:nv].min() < 3:
+        return None
+    vertices = values[vertex_first[:, None] + np.arange(3)]
+    integer = _integer_tokens(body, start, values)
+    sizes = values[face_first]
+    signed = np.isin(body[np.flatnonzero(start)[face_first]], np.frombuffer(b"+-", dtype=np.uint8))
+    if not (integer[face_first].all() and not signed.any() and np.all(sizes < 2**31)   # as str.isdigit()
+            and np.all(sizes_per_line[nv:] >= sizes + 1)):
+        return None
+    sizes = sizes.astype(np.int64)
+    used = _list_items(face_first, sizes)
+    if not integer[used].all():
+        return None
+    return _checked(vertices, values[used].astype(np.int64), sizes, lines[2:2 + nv] + 1, lines[2 + nv:] + 1)
+
+
+def _read_off_by_line(data: bytes) -> Polygons:
     records = []  # (line number, tokens) of the non-empty lines, comments removed
     for number, line in enumerate(_lines(data), 1):
         tokens = line.split("#", 1)[0].split()
@@ -197,6 +376,50 @@ def _read_stl(data: bytes) -> Polygons:
     if not data.lstrip()[:5].lower() == b"solid":
         raise _Malformed(f"neither a binary STL (its {len(data)} bytes do not match the triangle count in "
                          f"the header) nor an ASCII one (which starts with 'solid')")
+    bulk = _read_ascii_stl_bulk(data)
+    return bulk if bulk is not None else _read_ascii_stl_by_line(data)
+
+
+STL_KEYWORDS = (b"vertex", b"endfacet", b"solid", b"endsolid", b"facet", b"outer", b"endloop")
+
+
+def _read_ascii_stl_bulk(data: bytes) -> Polygons | None:
+    """The triangles of an ASCII STL whose keywords are lower case and whose facets hold three vertices
+    of three numbers each, parsed in bulk; None when the line parser must read it or name its problem."""
+    text = np.frombuffer(data + b"\n", dtype=np.uint8)
+    if _has_unusual_space(data):
+        return None
+    start, token_line = _tokens(text)
+    lines, first = _non_blank_lines(token_line)
+    tokens_per_line = np.diff(np.append(first, len(token_line)))
+    at = np.flatnonzero(start)[first]                                # where each line's first word begins
+    width = max(map(len, STL_KEYWORDS)) + 1
+    words = text[np.minimum(at[:, None] + np.arange(width), len(text) - 1)]
+    kind = np.full(len(lines), -1)
+    for index, keyword in enumerate(STL_KEYWORDS):
+        pattern = np.frombuffer(keyword, dtype=np.uint8)
+        kind[np.all(words[:, :len(pattern)] == pattern, axis=1) & _is_space(words[:, len(pattern)])] = index
+    vertex, end_facet = kind == 0, kind == 1
+    facets = kind[vertex | end_facet]   # must run vertex, vertex, vertex, endfacet, ...
+    if (kind < 0).any() or np.any(tokens_per_line[vertex] != 4) or len(facets) % 4 or not np.all(
+            facets.reshape(-1, 4) == [0, 0, 0, 1]):
+        return None
+    work = text.copy()
+    work[at[vertex][:, None] + np.arange(len(STL_KEYWORDS[0]))] = ord(" ")   # the keyword
+    ends = np.flatnonzero(text == 10)
+    line_starts = np.concatenate([[0], ends[:-1] + 1])
+    is_vertex_line = np.zeros(len(ends), dtype=np.int8)
+    is_vertex_line[lines[vertex]] = 1
+    vertex_text = work[np.repeat(is_vertex_line, ends - line_starts + 1) == 1]
+    if not FLOAT_BYTES[vertex_text].all():
+        return None
+    values = _bulk_numbers(vertex_text, np.float64, 3 * np.count_nonzero(vertex))
+    if values is None:
+        return None
+    return _triangle_soup(values.reshape(-1, 3), lines[vertex] + 1)
+
+
+def _read_ascii_stl_by_line(data: bytes) -> Polygons:
     vertices, vertex_lines, in_facet = [], [], 0
     for number, line in enumerate(_lines(data), 1):
         parts = line.split()
@@ -283,17 +506,70 @@ def _read_ply(data: bytes) -> Polygons:
     if not lists:
         raise _Malformed(f"the face element needs an integer list property {' or '.join(FACE_LISTS)}", face.line)
     if order == "ascii":
-        rows, row_lines = _ply_ascii(data, body_start, elements, len(header))
+        bulk = _ply_ascii_bulk(data, body_start, elements, len(header))
+        rows, row_lines = bulk if bulk is not None else _ply_ascii(data, body_start, elements, len(header))
     else:
         rows, row_lines = _ply_binary(data, body_start, elements, order), {}
     xyz = np.stack([rows["vertex"][axis] for axis in "xyz"], axis=1)
     polygons = rows["face"][lists[0]]
-    if isinstance(polygons, np.ndarray):        # every face has the same number of corners
+    if isinstance(polygons, np.ndarray) and polygons.ndim == 2:   # every face has the same number of corners
         sizes, corners = np.full(len(polygons), polygons.shape[1]), polygons.ravel()
-    else:
+    else:   # a list of faces, or no face at all (an empty 1-D array)
         sizes = np.array([len(p) for p in polygons], dtype=np.int64)
-        corners = np.concatenate(polygons) if polygons else np.zeros(0, np.int64)
+        corners = np.concatenate(polygons) if len(polygons) else np.zeros(0, np.int64)
     return _checked(xyz, corners.astype(np.int64), sizes, row_lines.get("vertex"), row_lines.get("face"))
+
+
+def _ply_ascii_bulk(data: bytes, start: int, elements: list, header_lines: int) -> tuple[dict, dict] | None:
+    """:func:`_ply_ascii`'s result parsed in bulk, for elements of numbers only or of one list only (a
+    face); None when the line parser must read the rows or name their problem (both agree on every file)."""
+    if _has_unusual_space(data):
+        return None
+    body = np.frombuffer(data[start:] + b"\n", dtype=np.uint8)
+    if not FLOAT_BYTES[body].all():
+        return None
+    start_byte, token_line = _tokens(body)
+    lines, first = _non_blank_lines(token_line)
+    if len(lines) != sum(element.count for element in elements):
+        return None
+    values = _bulk_numbers(body, np.float64, len(token_line))
+    if values is None:
+        return None
+    tokens_per_line = np.diff(np.append(first, len(values)))
+    integer = _integer_tokens(body, start_byte, values)
+
+    def numbers(used, kind):   # the values at token indices ``used``, or None where int() would refuse one
+        return values[used] if kind.startswith("f") or integer[used].all() else None
+
+    rows, row_lines, at = {}, {}, 0
+    for element in elements:
+        row_first, row_tokens = first[at:at + element.count], tokens_per_line[at:at + element.count]
+        row_lines[element.name] = lines[at:at + element.count] + header_lines + 1
+        at += element.count
+        if all(length is None for _, _, length in element.properties):
+            if len(row_first) and row_tokens.min() < len(element.properties):
+                return None
+            rows[element.name] = {}
+            for column, (name, kind, _) in enumerate(element.properties):
+                rows[element.name][name] = numbers(row_first + column, kind)
+                if rows[element.name][name] is None:
+                    return None
+        elif len(element.properties) == 1:
+            (name, kind, _), = element.properties
+            sizes = numbers(row_first, "int")
+            if sizes is None or np.any(sizes < 0) or np.any(row_tokens < sizes + 1):
+                return None
+            sizes = sizes.astype(np.int64)
+            items = numbers(_list_items(row_first, sizes), kind)
+            if items is None:
+                return None
+            items = items if kind.startswith("f") else items.astype(np.int64)
+            uniform = len(sizes) and np.all(sizes == sizes[0])
+            rows[element.name] = {name: items.reshape(len(sizes), sizes[0]) if uniform else
+                                  np.split(items, np.cumsum(sizes)[:-1]) if len(sizes) else []}
+        else:
+            return None
+    return rows, row_lines
 
 
 def _ply_ascii(data: bytes, start: int, elements: list, header_lines: int) -> tuple[dict, dict]:

@@ -16,6 +16,10 @@ import numpy as np
 from .checks import vector3
 
 UPWARD = 1e-3   # a face counts as upward-facing when its unit normal's component along up exceeds this
+# Lattice points a grid may span (summed over the upward faces' bounding boxes, about twice the sensors):
+# 1e8 sensors already take 4.8 GB of points and normals and hours of queries per sun step, so more is
+# almost surely a spacing in the wrong unit, refused before NumPy tries to allocate it.
+MAX_LATTICE_POINTS = 2 * 10**8
 
 
 @dataclass(frozen=True)
@@ -47,25 +51,42 @@ def grid_on_faces(meshes, spacing: float, offset: float = 0.0, up=(0.0, 1.0, 0.0
     u = np.cross(up, [1.0, 0.0, 0.0] if abs(up[0]) < 0.9 else [0.0, 0.0, 1.0])
     u /= np.linalg.norm(u)
     v = np.cross(up, u)
+    faces = [_upward_faces(mesh, spacing, u, v, up) for mesh in meshes]
+    count = sum(_lattice_count(plane) for _, _, plane in faces)
+    if count > MAX_LATTICE_POINTS:
+        raise ValueError(f"spacing: {spacing} puts {count:.3g} lattice points over the upward faces' bounding "
+                         f"boxes, more than the {MAX_LATTICE_POINTS:.0e} a sensor grid may span")
     points, normals = [], []
-    for mesh in meshes:
-        p, n = _mesh_grid(mesh, spacing, u, v, up)
+    for corners, normal, plane in faces:
+        p, n = _mesh_grid(corners, normal, plane, spacing, up)
         points.append(p + offset * n)
         normals.append(n)
     return np.concatenate(points), np.concatenate(normals)
 
 
-def _mesh_grid(mesh, spacing, u, v, up):
-    """The lattice points on one mesh's upward-facing triangles, once each."""
+def _upward_faces(mesh, spacing, u, v, up):
+    """One mesh's upward-facing triangles: corners (F, 3, 3), unit normals (F, 3) and corners in
+    lattice units (F, 3, 2)."""
     corners = mesh.vertices.astype(np.float64)[mesh.faces]                # (F, 3, 3)
     normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
     length = np.linalg.norm(normal, axis=1)
     keep = length > 0
     normal[keep] /= length[keep, None]
-    upward = np.flatnonzero(keep & (normal @ up > UPWARD))
-    plane = np.stack([corners @ u, corners @ v], axis=-1) / spacing     # (F, 3, 2) in lattice units
+    upward = keep & (normal @ up > UPWARD)
+    corners, normal = corners[upward], normal[upward]
+    return corners, normal, np.stack([corners @ u, corners @ v], axis=-1) / spacing
+
+
+def _lattice_count(plane) -> float:
+    """Lattice points in the bounding boxes of the triangles ``plane`` (F, 3, 2), as a float (no overflow)."""
+    sides = np.floor(plane.max(axis=1)) - np.ceil(plane.min(axis=1)) + 1
+    return float(np.prod(np.maximum(sides, 0), axis=1).sum())
+
+
+def _mesh_grid(corners, normal, plane, spacing, up):
+    """The lattice points on one mesh's upward-facing triangles, once each."""
     keys, points, normals = [], [], []
-    for f in upward:
+    for f in range(len(plane)):
         tri = plane[f]
         lo, hi = np.ceil(tri.min(axis=0)).astype(np.int64), np.floor(tri.max(axis=0)).astype(np.int64)
         if np.any(hi < lo):
