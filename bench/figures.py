@@ -17,6 +17,8 @@ import re
 import sys
 from pathlib import Path
 
+import numpy as np
+
 import report
 from peers import PEERS
 from report import time_of
@@ -229,7 +231,27 @@ def methods_table() -> str:
     return "\n".join(lines)
 
 
-BLOCKS = {"methods-table": methods_table}
+def auto_table() -> str:
+    """method="auto" and lod="auto" per budget, from ``auto.json`` (bench/auto.py)."""
+    rows = load("auto.json")["rows"]
+    lines = ["| budget | cases | budget broken: auto / lod=\"auto\" | auto / exact: median, worst | "
+             "auto / sweep's oracle: median, worst | chosen (most frequent per case) |", "|---|---|---|---|---|---|"]
+    for budget in sorted({r["budget"] for r in rows}, reverse=True):
+        cases = [r for r in rows if r["budget"] == budget]
+        ratios = [r["auto_vs_exact"] for r in cases]
+        oracle = [r["auto_vs_oracle"] for r in cases]
+        chosen = {c: sum(r["chosen"] == c for r in cases) for c in sorted({r["chosen"] for r in cases})}
+        lines.append(f"| {budget:g} | {len(cases)} | {sum(r['broken'] for r in cases)} / "
+                     f"{sum(r['lod_auto']['broken'] for r in cases)} | {np.median(ratios):.2f}, {max(ratios):.2f} | "
+                     f"{np.median(oracle):.2f}, {max(oracle):.2f} | "
+                     f"{', '.join(f'{c} {n}' for c, n in chosen.items())} |")
+    scenes = sorted({r["scene"] for r in rows}, key=[r["scene"] for r in rows].index)
+    lines.append(f"\nScenes: {', '.join(scenes)}, {count(rows[0]['receivers'])} receivers, with and without normals "
+                 f"(`auto.json`; per case: `bench/results/auto.md`).")
+    return "\n".join(lines)
+
+
+BLOCKS = {"methods-table": methods_table, "auto-table": auto_table}
 BLOCK = re.compile(r"(<!-- figures: ([\w-]+) -->\n)(.*?)(<!-- /figures -->)", re.DOTALL)
 
 

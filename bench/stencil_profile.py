@@ -76,7 +76,7 @@ def main(argv=None) -> dict:
     exact.prepare(scene.mesh, light, scene.bounds, eps)
     volume = volume_method.volume.mesh
     surface = volume_method._moved_depths(view, seen, zbuffer)
-    kernel = device.kernel(raster._FILE, "raster_stencil", raster._OPTIONS + ("-DSTENCIL_ZFAIL=1",))
+    kernel = device.kernel(raster._FILE, "raster_pass", raster._OPTIONS)
 
     times: dict[str, Timing] = {}
     images: dict[str, np.ndarray] = {}
@@ -107,12 +107,13 @@ def main(argv=None) -> dict:
         depth = device.to_device(surface)
         for bands in args.bands:
             image = raster._image(device, view, 0, "stencil")
-            for part, n, global_bands, local in (("small", setup.triangles, 1, (raster._GROUP, 1)),
-                                                 ("big", setup.big_count, bands, (1, min(raster._BAND_GROUP, bands)))):
+            # raster._draw's one launch split in two: the whole triangles (no big ones), the big ones alone
+            for part, n, big_count in (("small", setup.triangles, 0), ("big", 0, setup.big_count)):
                 def launch():
-                    if n:
-                        kernel(queue, (raster._rounded(n, local[0]), global_bands), local, setup.big, np.int32(n),
-                               setup.count, setup.xy, setup.depth, np.int32(width), np.int32(height), depth, image)
+                    if n + big_count:
+                        kernel(queue, (raster._rounded(n + big_count * bands),), (raster._GROUP,), setup.big,
+                               np.int32(n), np.int32(big_count), np.int32(bands), setup.count, setup.xy, setup.depth,
+                               np.int32(width), np.int32(height), np.int32(raster._ZFAIL_STENCIL_PASS), image, depth)
                 timed("fill_small" if part == "small" else f"fill_big_bands{bands}", launch, keep)
             images[bands] = timed("readback", lambda: device.from_device(image, (height, width), np.int32), keep)
     reference = next(iter(images.values()))

@@ -2,11 +2,13 @@
  *
  * Pipeline, one launch each:
  *   raster_setup      per triangle: transform, clip in homogeneous space, snap corners to fixed point
- *   raster_depth      per triangle: nearest depth of every pixel (atomic_max on the float's bits)
- *   raster_triangle   per triangle: smallest triangle id among the fragments at the stored depth
- *   raster_count      per triangle: how many fragments each pixel received (overdraw, for tests)
- *   raster_stencil    per triangle: shadow-volume stencil, +-1 per fragment by screen winding where
- *                     the fragment passes the depth test against a Z-buffer (z-pass or z-fail)
+ *   raster_pass       per triangle, one kernel for every pass (an argument says which, so that a
+ *                     call compiles one kernel, not one per pass):
+ *                       depth     nearest depth of every pixel (atomic_max on the float's bits)
+ *                       triangle  smallest triangle id among the fragments at the stored depth
+ *                       count     how many fragments each pixel received (overdraw, for tests)
+ *                       stencil   shadow-volume stencil, +-1 per fragment by screen winding where
+ *                                 the fragment passes the depth test against a Z-buffer (z-pass or z-fail)
  *   raster_receivers  per covered pixel: surface point and viewer-facing normal seen through it
  *
  * Conventions (host/shadowcl/views.py): clip = matrix * (relative position, 1); depth = z / w in
@@ -22,8 +24,6 @@
  *                  functions (a difference of two products of differences) below 2^61 in a long
  *   MAX_CORNERS    corners of a triangle clipped by the six planes (3 + one per plane)
  *   BIG_BOX        pixels in a triangle's bounding box above which several work-items draw it
- *   STENCIL_ZFAIL  raster_stencil only: 1 counts fragments behind the Z-buffer (z-fail), 0 in front
- *                  of it (z-pass)
  */
 
 /* INLINE, dot3 and SC_ABS, SC_MIN, SC_SQRT: math that PoCL inlines */
@@ -197,11 +197,8 @@ kernel void raster_setup(global const float *vertices, global const int *faces, 
 /* Rasterization                                                                                   */
 /* ---------------------------------------------------------------------------------------------- */
 
-enum pass { DEPTH_PASS, TRIANGLE_PASS, COUNT_PASS, STENCIL_PASS };
-
-#ifndef STENCIL_ZFAIL
-#define STENCIL_ZFAIL 1
-#endif
+/* The values of raster_pass's pass argument (host/shadowcl/raster.py names them too) */
+enum pass { DEPTH_PASS, TRIANGLE_PASS, COUNT_PASS, ZFAIL_STENCIL_PASS, ZPASS_STENCIL_PASS };
 
 /* Edge function of edge a -> b at p: positive on the interior side of a positively ordered
  * triangle (y down: the interior is right of a -> b as seen on screen). Exact in 64 bits. */
@@ -241,17 +238,16 @@ INLINE void shade(const enum pass pass, const int pixel, const float depth, cons
     case COUNT_PASS:
         atomic_inc(target + pixel);
         break;
-    case STENCIL_PASS:
-        /* Winding number of the surface point, seen as lying just in front of its own depth (a face
-         * at the same depth, bit for bit, counts as behind it). z-fail: faces behind the point, +1
-         * leaving the volume (back faces), -1 entering; z-pass: faces in front of it, +1 entering. */
-#if STENCIL_ZFAIL
+    /* Winding number of the surface point, seen as lying just in front of its own depth (a face
+     * at the same depth, bit for bit, counts as behind it). z-fail: faces behind the point, +1
+     * leaving the volume (back faces), -1 entering; z-pass: faces in front of it, +1 entering. */
+    case ZFAIL_STENCIL_PASS:
         if (as_uint(depth) <= depth_bits[pixel])
             atomic_add(target + pixel, (uint)winding);
-#else
+        break;
+    case ZPASS_STENCIL_PASS:
         if (as_uint(depth) > depth_bits[pixel])
             atomic_sub(target + pixel, (uint)winding);
-#endif
         break;
     }
 }
@@ -327,68 +323,60 @@ INLINE void draw_triangle(const enum pass pass, int2 a, int2 b, int2 c, float za
     }
 }
 
-/* Draw one clipped triangle as the fan of its corners. The launch says which, and which rows:
- * global size (n, 1): work-item gid draws triangle gid whole, unless its box is empty or big;
- * global size (big_count, bands): work-item (gid, band) draws rows band, band + bands, ... of
- * triangle big[gid]. */
-INLINE void draw_polygon(const enum pass pass, global const int *big, const int n, global const int *corner_count,
-                         global const int2 *corner_xy, global const float *corner_depth, const int width,
-                         const int height, global uint *target, global const uint *depth_bits)
+/* Draw one clipped triangle as the fan of its corners. One launch of n + big_count * bands
+ * work-items (a 1D range, so that every launch has one local size and PoCL compiles the kernel once):
+ * work-item k < n draws triangle k whole, unless its box is empty or big; the rest draw rows band,
+ * band + bands, ... of big triangle big[j], (j, band) numbered band-major from n on, so that a
+ * work-group holds bands of many big triangles and each big triangle spreads over work-groups. */
+INLINE void draw_polygon(const enum pass pass, global const int *big, const int n, const int big_count,
+                         const int bands, global const int *corner_count, global const int2 *corner_xy,
+                         global const float *corner_depth, const int width, const int height,
+                         global uint *target, global const uint *depth_bits)
 {
-    const int gid = get_global_id(0), band = get_global_id(1), bands = get_global_size(1);
-    if (gid >= n)
+    const long k = get_global_id(0);
+    if (k >= n + (long)big_count * bands)
         return;
-    const int i = bands == 1 ? gid : big[gid], count = corner_count[i];
+    const bool whole = k < n;
+    const int i = whole ? (int)k : big[(k - n) % max(big_count, 1)], band = whole ? 0 : (int)((k - n) / big_count);
+    const int count = corner_count[i];
     global const int2 *xy = corner_xy + i * MAX_CORNERS;
     global const float *depth = corner_depth + i * MAX_CORNERS;
-    if (bands == 1 && count >= 3) {
+    if (whole && count >= 3) {
         const int4 box = polygon_box(xy, count, width, height);
         if (is_empty(box) || is_big(box))
             return;
     }
-    for (int k = 1; k + 1 < count; ++k)
-        draw_triangle(pass, xy[0], xy[k], xy[k + 1], depth[0], depth[k], depth[k + 1], width, height, band,
-                      bands, (uint)i, target, depth_bits);
+    for (int c = 1; c + 1 < count; ++c)
+        draw_triangle(pass, xy[0], xy[c], xy[c + 1], depth[0], depth[c], depth[c + 1], width, height, band,
+                      whole ? 1 : bands, (uint)i, target, depth_bits);
 }
 
-#define RASTER_PASS_ARGS                                                                                 \
-    global const int *big, const int n, global const int *corner_count, global const int2 *corner_xy, \
-        global const float *corner_depth, const int width, const int height
-
-/* The raster passes, after raster_setup, launched twice: over all n triangles, then over the
- * big_count big ones (see draw_polygon). */
-
-/* raster_depth. In/out: depth_bits (H * W, row-major), the float depth's bits, 0 (= 0.0,
- * infinitely far) before the first triangle; each fragment does atomic_max: the nearest depth wins. */
-kernel void raster_depth(RASTER_PASS_ARGS, global uint *depth_bits)
+/* raster_pass, after raster_setup: draws the n triangles (big_count of them, listed in big, shared by
+ * bands work-items each, see draw_polygon) with pass (enum pass):
+ *   DEPTH_PASS     In/out: target = depth bits (H * W, row-major), the float depth's bits, 0 (= 0.0,
+ *                  infinitely far) before the first triangle; each fragment does atomic_max: the
+ *                  nearest depth wins.
+ *   TRIANGLE_PASS  After DEPTH_PASS. In: depth_bits. In/out: target = triangle (H * W), 0xFFFFFFFF (no
+ *                  triangle) before the first one; a fragment whose depth equals the stored depth does
+ *                  atomic_min of its triangle id, so equal depths resolve to the smallest id whatever
+ *                  the scheduling.
+ *   COUNT_PASS     In/out: target = count (H * W), zero before; every fragment increments its pixel. A
+ *                  watertight surface crossed once by each pixel's ray gives exactly 1 inside its
+ *                  outline: this makes "drawn twice" and "dropped" observable.
+ *   ZFAIL_STENCIL_PASS, ZPASS_STENCIL_PASS: the shadow-volume stencil of closed, consistently wound
+ *                  volumes (outward faces counter-clockwise). In: depth_bits, a Z-buffer of the
+ *                  receivers (DEPTH_PASS's output). In/out: target = stencil (H * W, two's-complement
+ *                  int32), set by the host before the first triangle; every fragment passing the depth
+ *                  test adds its winding, so a covered pixel ends with the winding number of its surface
+ *                  point (z-pass: counted from the eye's, which the host puts in first).
+ * depth_bits is not read by DEPTH_PASS and COUNT_PASS (pass target). */
+kernel void raster_pass(global const int *big, const int n, const int big_count, const int bands,
+                        global const int *corner_count, global const int2 *corner_xy,
+                        global const float *corner_depth, const int width, const int height, const int pass,
+                        global uint *target, global const uint *depth_bits)
 {
-    draw_polygon(DEPTH_PASS, big, n, corner_count, corner_xy, corner_depth, width, height, depth_bits, depth_bits);
-}
-
-/* raster_triangle, after raster_depth. In: depth_bits. In/out: triangle (H * W), 0xFFFFFFFF (no
- * triangle) before the first one; a fragment whose depth equals the stored depth does atomic_min of its
- * triangle id, so equal depths resolve to the smallest id whatever the scheduling. */
-kernel void raster_triangle(RASTER_PASS_ARGS, global const uint *depth_bits, global uint *triangle)
-{
-    draw_polygon(TRIANGLE_PASS, big, n, corner_count, corner_xy, corner_depth, width, height, triangle, depth_bits);
-}
-
-/* raster_count. In/out: count (H * W), zero before; every fragment increments its pixel. A
- * watertight surface crossed once by each pixel's ray gives exactly 1 inside its outline: this
- * makes "drawn twice" and "dropped" observable. */
-kernel void raster_count(RASTER_PASS_ARGS, global uint *count)
-{
-    draw_polygon(COUNT_PASS, big, n, corner_count, corner_xy, corner_depth, width, height, count, count);
-}
-
-/* raster_stencil: the shadow-volume stencil of closed, consistently wound volumes (outward faces
- * counter-clockwise). In: depth_bits, a Z-buffer of the receivers (raster_depth's output). In/out:
- * stencil (H * W, two's-complement int32), set by the host before the first triangle; every fragment
- * passing the depth test (STENCIL_ZFAIL) adds its winding, so a covered pixel ends with the winding
- * number of its surface point (z-pass: counted from the eye's, which the host puts in first). */
-kernel void raster_stencil(RASTER_PASS_ARGS, global const uint *depth_bits, global uint *stencil)
-{
-    draw_polygon(STENCIL_PASS, big, n, corner_count, corner_xy, corner_depth, width, height, stencil, depth_bits);
+    draw_polygon((enum pass)pass, big, n, big_count, bands, corner_count, corner_xy, corner_depth, width, height,
+                 target, depth_bits);
 }
 
 /* ---------------------------------------------------------------------------------------------- */

@@ -18,8 +18,6 @@ import shadowcl as sc
 from conftest import PROJECT, SCENES
 from shadowcl.methods import default_eps
 
-distributed = pytest.importorskip("dask.distributed")
-
 
 def csg_scene() -> sc.Mesh:
     """A hollowed, rotated box and a sphere with a cylinder bored through it, over a ground slab."""
@@ -114,6 +112,19 @@ def test_pairwise_sum_is_the_level_by_level_tree(parts):
     assert tree.total() == level[0]
 
 
+def test_receivers_are_framed_once_per_loop(rng, monkeypatch):
+    """The loop frames its receivers once, not once per light (a float64 N x 3 copy each); the counts
+    are still the per-light masks' sum (test_counts_are_the_sum_of_the_masks)."""
+    from shadowcl.frame import Frame
+
+    calls = []
+    framed = Frame.receivers
+    monkeypatch.setattr(Frame, "receivers", lambda self, receivers: calls.append(1) or framed(self, receivers))
+    points, normals = receivers(rng, 500)
+    sc.shadow_counts(csg_scene(), directional_lights(rng, 4), points, normals, batch=2)
+    assert len(calls) == 1
+
+
 def test_no_points():
     counts = sc.shadow_counts(csg_scene(), [sc.DirectionalLight((0, -1, 0))], np.zeros((0, 3)))
     assert counts.shape == (0,)
@@ -140,12 +151,16 @@ def bar_case():
 
 
 def check_against_embree(counts, matrix, embree, n):
+    """Each matrix row against Embree's mask of that light, and the counts against Embree's masks summed,
+    each within the bar on its own (not through our matrix: counts = the masks' sum is checked above,
+    test_counts_are_the_sum_of_the_masks, and would make this bound hold by construction)."""
     mine = np.unpackbits(matrix, axis=1, count=n).astype(bool)
     differ = np.count_nonzero(mine != embree, axis=1)
     # The bar: at most 2e-5 of the receivers differ per light (1 of 50,000), float32 Embree vs the exact method.
     assert differ.max() <= 2e-5 * n, f"receivers differing per light: {differ.tolist()}"
-    np.testing.assert_array_equal(counts, mine.sum(axis=0))
-    assert np.abs(counts - embree.sum(axis=0)).sum() <= differ.sum()
+    # The same bar over the counts: in all, at most 2e-5 n per light of count between us and Embree.
+    off = np.abs(counts - embree.sum(axis=0))
+    assert off.sum() <= 2e-5 * n * len(embree), f"counts off Embree's by {off.sum()} in all"
 
 
 def test_counts_match_embree_over_50_lights(bar_case):
@@ -158,10 +173,21 @@ def test_counts_match_embree_over_50_lights(bar_case):
 # Dask LocalCluster ------------------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def client():
+    distributed = pytest.importorskip("dask.distributed")   # here: the tests above need no Dask
     from shadowcl.distributed import local_cluster
 
     with local_cluster(2, threads=1) as cluster, distributed.Client(cluster) as client:
         yield client
+
+
+def worker_compute_units() -> int:
+    from shadowcl.device import get_device
+    return get_device().cl_device.max_compute_units
+
+
+def worker_loops() -> int:
+    from shadowcl import distributed
+    return len(distributed._loops)
 
 
 def test_cluster_run_equals_local_run_and_embree(bar_case, client):
@@ -172,7 +198,48 @@ def test_cluster_run_equals_local_run_and_embree(bar_case, client):
     np.testing.assert_array_equal(remote, local)          # bit for bit: the same sums in the same order
     matrix = sc.shadow_matrix(mesh, lights, points, normals, batch=8, client=client.scheduler.address)
     check_against_embree(sc.shadow_counts(mesh, lights, points, normals, client=client), matrix, embree, len(points))
-    assert client.run(lambda: os.environ["POCL_MAX_PTHREAD_COUNT"]) == dict.fromkeys(client.run(os.getpid), "1")
+    # each worker's PoCL device has the 1 thread it was given, and no run's loop outlives its run
+    assert client.run(worker_compute_units) == dict.fromkeys(client.run(os.getpid), 1)
+    assert set(client.run(worker_loops).values()) == {0}
+
+
+def test_worker_with_two_threads_runs_batches_one_at_a_time(rng, monkeypatch):
+    """A worker of 2 Dask threads (a `dask worker`'s default is one per core) shares one loop between
+    them: the counts are the local run's, twice in a row. The client makes no OpenCL device for a
+    cluster run; a bad parameter value comes back from the worker as its named ValueError; the worker
+    killed mid-run (the only holder of the scattered data) ends the run in a RuntimeError saying why."""
+    distributed = pytest.importorskip("dask.distributed")
+    from shadowcl.distributed import pocl_environment
+
+    mesh = csg_scene()
+    points, normals = receivers(rng, 20_000)
+    lights = directional_lights(rng, 24)
+    local = sc.shadow_counts(mesh, lights, points, normals, batch=1)
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=True, dashboard_address=None,
+                                  env=pocl_environment(1)) as cluster, distributed.Client(cluster) as client:
+        monkeypatch.setattr("shadowcl.counts.get_device", lambda *args: pytest.fail("a device in the client"))
+        for _ in range(2):
+            np.testing.assert_array_equal(sc.shadow_counts(mesh, lights, points, normals, batch=1, client=client), local)
+        with pytest.raises(ValueError, match="resolution"):
+            sc.shadow_counts(mesh, lights[:2], points, method="shadow_map", resolution=0, client=client)
+        # the only worker, which holds the scattered data, killed mid-run: a RuntimeError that says why
+        [pid] = client.run(os.getpid).values()
+        outcome = []
+
+        def run():
+            try:
+                sc.shadow_counts(mesh, lights, points, normals, batch=1, client=client)
+            except Exception as error:
+                outcome.append(error)
+        thread = threading.Thread(target=run)
+        thread.start()
+        while thread.is_alive() and not client.run_on_scheduler(lambda dask_scheduler: any(
+                ts.state == "memory" for key, ts in dask_scheduler.tasks.items() if str(key).startswith("shadowcl-"))):
+            time.sleep(0.05)
+        os.kill(pid, signal.SIGKILL)
+        thread.join(120)
+        assert len(outcome) == 1 and isinstance(outcome[0], RuntimeError) and "2 or more workers" in str(outcome[0])
+        client.wait_for_workers(1, timeout=60)    # the nanny's new worker: the cluster then closes at once
 
 
 def test_worker_killed_mid_run_gives_the_same_counts(client, rng):

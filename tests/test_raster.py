@@ -151,6 +151,18 @@ def test_dyadic_soup_matches_reference_exactly(device, rng, width, height):
     np.testing.assert_array_equal(raster.coverage_count(device, mesh, view), reference.coverage_count(mesh, view))
 
 
+def test_big_triangles_in_the_shared_launch_match_reference_exactly(device, rng):
+    """More big triangles than a work-group holds, their bands numbered band-major after the whole
+    triangles in raster_pass's one launch (so a group mixes triangles and bands, and wraps): the
+    same pixels, depths, ids and overdraw as the reference."""
+    mesh, _ = dyadic_soup(rng, 600)
+    view = dyadic_view(256, 256)
+    setup = raster._setup(device, mesh, view)
+    assert raster._GROUP < setup.big_count < setup.triangles  # the case this test is about
+    assert_zbuffer_matches(raster.rasterize(device, mesh, view), reference.rasterize(mesh, view), "big triangles")
+    np.testing.assert_array_equal(raster.coverage_count(device, mesh, view), reference.coverage_count(mesh, view))
+
+
 @pytest.mark.parametrize("kind", ["perspective", "orthographic"])
 def test_setup_matches_reference(device, rng, kind):
     mesh, view = random_soup(rng, kind)

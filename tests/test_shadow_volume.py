@@ -507,4 +507,4 @@ def test_bad_input_is_named(device, call, error, message):
 
 
 def test_listed_in_methods():
-    assert set(sc.methods()["shadow_volume"]) == {"lod", "silhouettes", "max_error", "stencil", "eps"}
+    assert set(sc.methods()["shadow_volume"]) == {"lod", "silhouettes", "max_error", "receivers", "stencil", "eps"}

@@ -2,6 +2,7 @@
 sun-hours command end to end."""
 
 import csv
+import sys
 
 import numpy as np
 import pytest
@@ -59,7 +60,18 @@ def test_only_suns_above_the_horizon():
     assert sc.sun_lights(80.0, 0.0, start="2026-12-21", end="2026-12-22") == []    # polar night
 
 
+def test_a_year_in_a_daylight_saving_timezone():
+    """Europe/Paris over 2026: both clock changes crossed, every step one hour of elapsed time (8760),
+    and a naive start in the spring gap (02:30 does not exist) taken as the first time after it."""
+    times = sun_times("2026-01-01", "2027-01-01", "1h", "Europe/Paris")
+    assert len(times) == 8760 and set(np.diff(times.asi8)) == {np.diff(times.asi8)[0]}
+    assert str(times.tz) == "Europe/Paris" and times[0].utcoffset() == pd.Timedelta("1h")
+    assert sun_times("2026-03-29 02:30", "2026-03-29 05:00", "1h", "Europe/Paris")[0].hour == 3
+    assert 4000 < len(sc.sun_lights(48.85, 2.35, start="2026-01-01", end="2027-01-01", timezone="Europe/Paris")) < 4800
+
+
 @pytest.mark.parametrize("call, error, match", [
+    (lambda: sun_times("2026-01-01", "2026-01-02", "1h", "Mars/Base"), ValueError, "timezone"),
     (lambda: sc.sun_lights(91.0, 0.0, start="2026-01-01", end="2026-01-02"), ValueError, "latitude"),
     (lambda: sc.sun_lights(-90.5, 0.0, start="2026-01-01", end="2026-01-02"), ValueError, "latitude"),
     (lambda: sc.sun_lights(10.0, 200.0, start="2026-01-01", end="2026-01-02"), ValueError, "longitude"),
@@ -181,3 +193,35 @@ def test_sun_hours_command_errors(tmp_path, capsys):
     scene_file.write_text(SENSOR_SCENE + "[[sensors]]\nobjects = ['ground']\nspacing = 1\n")
     assert main(["sun-hours", str(scene_file), "--out", str(tmp_path / "x.png")]) == 2
     assert "pass --lat, --lon, --start, --end" in capsys.readouterr().err
+    site = ["--lat", "10", "--lon", "0", "--start", "2026-01-01", "--end", "2026-01-02", "--out", str(tmp_path / "x.png")]
+    assert main(["sun-hours", str(scene_file), *site, "--spacing", "0"]) == 2      # not the scene's spacing
+    assert "spacing: must be a positive distance, got 0" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("module, extra, options", [
+    ("pvlib", "shadowcl[sun]", []), ("dask.distributed", "shadowcl[distributed]", ["--workers", "1"])])
+def test_sun_hours_command_names_a_missing_extra(module, extra, options, tmp_path, capsys, monkeypatch):
+    """A missing extra: one line naming it, exit 2 (no traceback)."""
+    monkeypatch.setitem(sys.modules, module, None)      # import of a None entry raises ImportError
+    scene_file = tmp_path / "plain.toml"
+    scene_file.write_text(SENSOR_SCENE + "[[sensors]]\nobjects = ['ground']\nspacing = 1\n")
+    args = ["sun-hours", str(scene_file), "--lat", "10", "--lon", "0", "--start", "2026-01-01", "--end", "2026-01-02",
+            "--out", str(tmp_path / "x.png")]
+    assert main(args + options) == 2
+    err = capsys.readouterr().err
+    assert extra in err and err.count("\n") == 1
+
+
+def test_heat_map_is_drawn_with_the_scenes_north(tmp_path, monkeypatch):
+    """north = +x: the result keeps it and the heat map is drawn with it (not the default -z)."""
+    from shadowcl import sunhours
+
+    scene_file = tmp_path / "plain.toml"
+    scene_file.write_text(SENSOR_SCENE + "[[sensors]]\nobjects = ['ground']\nspacing = 1\n")
+    result = sunhours.sun_hours(sc.Scene.load(scene_file), 10.0, 0.0, "2026-01-01 00:00", "2026-01-01 03:00",
+                                north=(1.0, 0.0, 0.0))                  # night: no sun, no shadow work
+    assert result.north == (1.0, 0.0, 0.0)
+    drawn = {}
+    monkeypatch.setattr(sunhours, "heat_map", lambda *args, **kwargs: drawn.update(kwargs))
+    sunhours.write(result, tmp_path / "x.png")
+    assert drawn["north"] == (1.0, 0.0, 0.0)

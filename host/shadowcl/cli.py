@@ -109,9 +109,26 @@ def run_render(args) -> int:
     shadowed = result.shadow.any(axis=0).mean() if result.shadow.size else 0.0
     print(f"scene {scene.name}: {len(scene.mesh.faces)} triangles, {len(scene.lights)} light(s), method {args.method}")
     print(f"image {width}x{height}: {result.covered.sum()} pixels on the scene, {100 * shadowed:.1f} % of them in shadow")
+    for index, shadows in enumerate(result.shadows if args.method == "auto" else []):
+        print(f"light {index}: {auto_summary(shadows)}")
     print("times: " + ", ".join(f"{name} {seconds * 1e3:.1f} ms" for name, seconds in [("load", load_time), *result.timings.items()]))
     print(f"wrote {out.resolve()}")
     return 0
+
+
+def auto_summary(shadows) -> str:
+    """What method="auto" chose for one light, and on what evidence."""
+    chosen = dict(shadows.params["chosen"])
+    calibration = shadows.stats["calibration"]
+    settings = ", ".join(f"{k}={v!r}" for k, v in chosen.items() if k != "method")
+    text = f"auto chose {chosen.pop('method')}" + (f" ({settings})" if settings else "")
+    text += f" for budget {calibration['max_error']:g}"
+    if calibration["sample"]:
+        text += (f": sample {calibration['sample']:,} receivers, error {calibration['error']:.3g}, 99 % bound "
+                 f"{calibration['upper_bound']:.3g}")
+    tried = [r["method"] + (f"@{r['resolution']}" if "resolution" in r else "") for r in calibration["tried"] if "error" in r]
+    return (text + f", calibration {calibration['seconds'] * 1e3:.0f} ms, tried {', '.join(tried) or 'nothing'}; "
+            f"sample: {calibration['source']}")
 
 
 def _check_writable(out: Path) -> None:
@@ -205,7 +222,7 @@ def main(argv=None) -> int:
         if args.command == "devices":
             return run_devices()
         return run_methods()
-    except (ValueError, TypeError, OSError, RuntimeError, MemoryError) as error:
+    except (ValueError, TypeError, OSError, RuntimeError, MemoryError, ImportError) as error:   # ImportError: a missing extra, named
         # one line, even for a message that lists things (the devices, say) on lines of its own
         message = "; ".join(line.strip() for line in str(error).splitlines() if line.strip()).replace(":; ", ": ")
         print(f"shadowcl: error: {message}", file=sys.stderr)

@@ -108,7 +108,7 @@ def shadow_counts(scene_or_mesh, lights, points, normals=None, method: str = "ex
     (:mod:`shadowcl.distributed`); the result is the same bit for bit. ``progress`` shows a tqdm bar
     over the lights.
     """
-    job = LightJob(scene_or_mesh, lights, points, normals, method, weights, device, eps, batch, params)
+    job = LightJob(scene_or_mesh, lights, points, normals, method, weights, device, eps, batch, params, client)
     return job.run("counts", client, progress)
 
 
@@ -120,20 +120,27 @@ def shadow_matrix(scene_or_mesh, lights, points, normals=None, method: str = "ex
     Arguments as :func:`shadow_counts` (without ``weights``). ``np.unpackbits(matrix, axis=1,
     count=N).astype(bool)`` gives the (L, N) masks back.
     """
-    job = LightJob(scene_or_mesh, lights, points, normals, method, None, device, eps, batch, params)
+    job = LightJob(scene_or_mesh, lights, points, normals, method, None, device, eps, batch, params, client)
     return job.run("packed", client, progress)
 
 
 class LightJob:
     """The arguments of a many-lights call, checked once, and its batches run here or on a cluster."""
 
-    def __init__(self, scene_or_mesh, lights, points, normals, method, weights, device, eps, batch, params):
+    def __init__(self, scene_or_mesh, lights, points, normals, method, weights, device, eps, batch, params,
+                 client=None):
         self.lights = check_lights(lights)
         self.weights = check_weights(weights, len(self.lights))
         self.receivers = check_points(points, normals)
         mesh = as_mesh(scene_or_mesh)
         cls = method_class(method)
-        cls(get_device(device), **params)                      # bad parameters raise here, before any work
+        # bad parameters raise here, before any work: names always; values need an instance (exact's and
+        # angular's constructors read their device), so for a cluster run the workers' first batch checks
+        # them, and no device (all of PoCL's threads) is made in the client's process
+        if client is None:
+            cls(get_device(device), **params)
+        else:
+            cls.check_parameter_names(params)
         self.scene_or_mesh, self.method, self.device, self.params = scene_or_mesh, cls.name, device, params
         resolve_eps(cls, eps, mesh.bounds)                     # a bad eps raises here; None stays None, so
         self.eps = eps                                         # that a method refusing an eps gets none

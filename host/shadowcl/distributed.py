@@ -2,12 +2,15 @@
 
 The scene (its mesh, or the scene itself for methods that take one) and the receivers are scattered to
 every worker once (``broadcast=True``); each task is one batch of lights (:data:`shadowcl.counts.BATCH`)
-run by the worker's own :class:`~shadowcl.counts.LightLoop`, kept between tasks of the same run, on the
-worker's own OpenCL device. The batches' counts are summed on the workers by tasks in the local run's
+run by the worker's own :class:`~shadowcl.counts.LightLoop`, kept between tasks of the same run and
+released when the run ends, on the worker's own OpenCL device. A worker's batches run one at a time
+(a lock: the loop's device buffers are shared, and PoCL already uses every core the worker was given),
+whatever its number of Dask threads. The batches' counts are summed on the workers by tasks in the local run's
 binary tree (:class:`~shadowcl.counts.PairwiseSum`), so the sum is the local run's bit for bit and the
 client receives one array; packed masks come back batch by batch. A worker lost mid-run costs its
 batches only (and the sums it held): the scheduler reruns them elsewhere, from the copies of the
-scattered data the other workers hold.
+scattered data the other workers hold. That needs 2+ workers: when the only worker holding the data
+dies, the run ends in a RuntimeError that says so.
 
 PoCL's CPU device starts one thread per core in every process; ``workers x threads`` must not exceed
 the cores, so each worker's PoCL is limited to ``threads`` threads (:func:`pocl_environment`, set
@@ -18,6 +21,7 @@ by each task when its process has no device yet).
 from __future__ import annotations
 
 import os
+import threading
 import uuid
 
 import numpy as np
@@ -31,6 +35,7 @@ from .points import check_points
 POCL_THREAD_VARIABLES = ("POCL_CPU_MAX_CU_NUM", "POCL_MAX_PTHREAD_COUNT")
 
 _loops: dict = {}   # on a worker: run id -> its LightLoop (one run at a time is kept)
+_loop_lock = threading.Lock()   # on a worker: one batch at a time on its loop (the Dask threads share it)
 
 
 def pocl_environment(threads: int) -> dict[str, str]:
@@ -41,8 +46,7 @@ def pocl_environment(threads: int) -> dict[str, str]:
 def local_cluster(workers: int, threads: int | None = None):
     """A ``LocalCluster`` of ``workers`` processes, one Dask thread each, each PoCL limited to
     ``threads`` threads (default: the cores shared out, at least 1). Close it when done."""
-    from dask.distributed import LocalCluster
-
+    LocalCluster = _dask().LocalCluster
     threads = threads or max(1, (os.cpu_count() or 1) // workers)
     return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
                         env=pocl_environment(threads))
@@ -50,10 +54,7 @@ def local_cluster(workers: int, threads: int | None = None):
 
 def connect(client):
     """A ``dask.distributed.Client`` for ``client`` (a Client, or a scheduler address string)."""
-    try:
-        from dask.distributed import Client
-    except ImportError:
-        raise ImportError("client: Dask distributed is not installed (pip install 'shadowcl[distributed]')") from None
+    Client = _dask().Client
     if isinstance(client, Client):
         return client
     if isinstance(client, str):
@@ -61,20 +62,41 @@ def connect(client):
     raise TypeError(f"client: expected a dask.distributed.Client or a scheduler address, got {type(client).__name__}")
 
 
+def _dask():
+    """``dask.distributed``, or an ImportError that names the extra that brings it."""
+    try:
+        import dask.distributed
+    except ImportError:
+        raise ImportError("client: Dask distributed is not installed (pip install 'shadowcl[distributed]')") from None
+    return dask.distributed
+
+
 def run_on_cluster(job, kind: str, client, progress: bool) -> np.ndarray:
     """Run a :class:`shadowcl.counts.LightJob`'s batches on the cluster of ``client``; the local run's result."""
-    from dask.distributed import as_completed
-    from tqdm import tqdm
-
     if isinstance(client, str):                      # a client of our own, closed when done
         with connect(client) as own:
             return run_on_cluster(job, kind, own, progress)
-    client = connect(client)
+    client = connect(client)                         # first: its ImportError names the extra
+    from distributed.client import FutureCancelledError
+
+    run = uuid.uuid4().hex
+    try:
+        return _run(job, kind, client, progress, run)
+    except FutureCancelledError as error:
+        raise RuntimeError(f"client: the cluster lost this run's data ({error}); a lost worker is recovered "
+                           f"only when another worker holds the scattered scene: use 2 or more workers") from None
+    finally:
+        client.run(_release, run)
+
+
+def _run(job, kind: str, client, progress: bool, run: str) -> np.ndarray:
+    from dask.distributed import as_completed
+    from tqdm import tqdm
+
     cls = method_class(job.method)
     geometry = job.scene_or_mesh if cls.scene_input else as_mesh(job.scene_or_mesh)
     receivers = job.receivers
     [data] = client.scatter([(geometry, receivers.positions, receivers.normals)], broadcast=True, hash=False)
-    run = uuid.uuid4().hex
     spans = job.batches()
     futures = {client.submit(_batch_task, run, data, job.method, job.eps, job.params, kind,
                              job.lights[span], job.weights[span], key=f"shadowcl-{kind}-{run}-{index}"): index
@@ -98,13 +120,21 @@ def run_on_cluster(job, kind: str, client, progress: bool) -> np.ndarray:
 
 def _batch_task(run: str, data, method: str, eps: float | None, params: dict, kind: str, lights, weights) -> np.ndarray:
     """On a worker: one batch of lights, on the worker's loop for ``run`` (made on its first batch)."""
-    loop = _loops.get(run)
-    if loop is None:
-        _limit_pocl_threads()
-        geometry, positions, normals = data
-        _loops.clear()
-        loop = _loops[run] = LightLoop(geometry, check_points(positions, normals), method, eps, **params)
-    return run_batch(loop, kind, lights, weights)
+    with _loop_lock:
+        loop = _loops.get(run)
+        if loop is None:
+            _limit_pocl_threads()
+            geometry, positions, normals = data
+            _loops.clear()
+            loop = _loops[run] = LightLoop(geometry, check_points(positions, normals), method, eps, **params)
+        return run_batch(loop, kind, lights, weights)
+
+
+def _release(run: str) -> None:
+    """On a worker, when ``run`` ends: drop its loop (device buffers, the scattered data it holds). Not
+    under the lock: this runs on the worker's event loop, which must not wait for a batch; a batch still
+    running keeps its own reference."""
+    _loops.pop(run, None)
 
 
 def _limit_pocl_threads() -> None:

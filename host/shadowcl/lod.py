@@ -59,6 +59,7 @@ PASS_SHARE = 0.8           # a level measured at 80 % of the budget must still p
 MIN_SAMPLE, MAX_SAMPLE = 20_000, 400_000
 SAMPLE_SEED = 20261122
 MAX_CALIBRATIONS = 256     # per mesh
+LIGHT_BIN_DEGREES = 5.0    # lod="auto" calibrates once per bin of light direction this wide
 
 _LEVELS: "weakref.WeakKeyDictionary[Mesh, dict]" = weakref.WeakKeyDictionary()
 _CALIBRATIONS: "weakref.WeakKeyDictionary[Mesh, dict]" = weakref.WeakKeyDictionary()
@@ -250,22 +251,22 @@ def level_errors(device, mesh: Mesh, light, points, normals, eps: float, levels=
 
 
 # auto ------------------------------------------------------------------------------------------------
-def sample_size(max_error: float) -> int:
+def sample_size(max_error: float, pass_share: float = PASS_SHARE, minimum: int = MIN_SAMPLE) -> int:
     """Calibration receivers for an error budget ``max_error`` (a fraction of receivers).
 
     A level passes when the one-sided 99 % Clopper-Pearson upper bound of its error is within the budget
     (so "auto" picks a level over budget with probability <= 1 %). The sample is large enough that a
-    level measured at :data:`PASS_SHARE` of the budget still passes: the normal approximation
+    level measured at ``pass_share`` (default :data:`PASS_SHARE`) of the budget still passes: the normal approximation
     ``n = z^2 r / ((1 - r)^2 b)`` (108,206 for ``b = 0.001``, ``r = 0.8``, ``z = 2.326``) grown in 1 %
     steps until the exact bound agrees: 128,158 receivers for ``b = 0.001``, an expected 128 wrong at the
-    budget. Clamped to [MIN_SAMPLE, MAX_SAMPLE] (MAX_SAMPLE for b = 0, or any b below ~3e-4).
+    budget. Clamped to [minimum (default MIN_SAMPLE), MAX_SAMPLE] (MAX_SAMPLE for b = 0, or any b below ~3e-4).
     """
     if max_error <= 0:
         return MAX_SAMPLE
-    n = math.ceil(CONFIDENCE_Z ** 2 * PASS_SHARE / ((1 - PASS_SHARE) ** 2 * max_error))
-    while n < MAX_SAMPLE and upper_bound(math.floor(PASS_SHARE * max_error * n), n) > max_error:
+    n = math.ceil(CONFIDENCE_Z ** 2 * pass_share / ((1 - pass_share) ** 2 * max_error))
+    while n < MAX_SAMPLE and upper_bound(math.floor(pass_share * max_error * n), n) > max_error:
         n = math.ceil(1.01 * n)
-    return int(min(MAX_SAMPLE, max(MIN_SAMPLE, n)))
+    return int(min(MAX_SAMPLE, max(minimum, n)))
 
 
 def upper_bound(wrong: int, receivers: int) -> float:
@@ -318,24 +319,52 @@ class Calibration:
     seconds: float
 
 
-def _light_key(light) -> tuple:
-    return ("point", *light.position.tolist()) if isinstance(light, PointLight) else ("dir", *light.direction.tolist())
+def _light_bin(light, box: np.ndarray) -> tuple:
+    """The bin of ``light`` as seen from the receivers' box: its direction from the box's centre in
+    :data:`LIGHT_BIN_DEGREES` steps of polar and azimuth angle, and for a point light its distance in
+    quarter octaves. A calibration is reused across the lights of a bin (frames of a moving light)."""
+    if isinstance(light, PointLight):
+        offset = light.position - box.mean(axis=0)
+        distance = float(np.linalg.norm(offset))
+        kind = ("point", round(4 * math.log2(distance)) if distance > 0 else None)
+        direction = offset / distance if distance > 0 else np.array([0.0, 1.0, 0.0])
+    else:
+        kind, direction = ("dir",), -light.direction / np.linalg.norm(light.direction)
+    polar = math.degrees(math.acos(float(np.clip(direction[1], -1, 1))))
+    azimuth = math.degrees(math.atan2(float(direction[2]), float(direction[0])))
+    return (*kind, round(polar / LIGHT_BIN_DEGREES), round(azimuth / LIGHT_BIN_DEGREES) if polar > 1e-9 else 0)
 
 
-def calibrate(device, mesh: Mesh, light, receiver_bounds, eps: float, max_error: float) -> Calibration:
-    """Measure every level of ``mesh`` on a calibration sample (:func:`calibration_sample` of
-    :func:`sample_size` receivers) and choose one for ``max_error``; cached per (mesh, light, bounds, eps,
-    max_error)."""
+def calibrate(device, mesh: Mesh, light, receiver_bounds, eps: float, max_error: float,
+              receivers=None) -> Calibration:
+    """Measure every level of ``mesh`` on a calibration sample and choose one for ``max_error``.
+
+    The sample is drawn from the caller's ``receivers`` (points (N, 3), ``(points, normals)`` or a
+    ``Points``: with their normals or their absence; all of them when fewer than the budget needs) by
+    :func:`shadowcl.auto.calibration_sample`, sized by :func:`sample_size` with method="auto"'s pass share
+    and floor; without ``receivers``, :func:`calibration_sample` on ``mesh``'s surface in the bounds.
+    Cached per (mesh, light bin (:func:`_light_bin`), bounds, eps, max_error, receivers' count and box):
+    the frames of a moving light reuse the calibration of their bin.
+    """
+    from . import auto
+
     light = check_light(light)
     box = check_bounds("receiver_bounds", receiver_bounds)
     eps = non_negative_float("eps", eps)
     max_error = non_negative_float("max_error", max_error)
-    key = (_light_key(light), box.tobytes(), eps, max_error)
+    receivers = auto.calibration_receivers(receivers)
+    described = None if receivers is None else (len(receivers), receivers.bounds.tobytes(), receivers.normals is None)
+    key = (_light_bin(light, box), box.tobytes(), eps, max_error, described)
     per_mesh = _CALIBRATIONS.setdefault(mesh, {})
     if key not in per_mesh:
         start = time.perf_counter()
         meshes = levels(mesh)
-        points, normals = calibration_sample(mesh, box, sample_size(max_error), eps)
+        if receivers is None:
+            points, normals = calibration_sample(mesh, box, sample_size(max_error), eps)
+        else:
+            count = sample_size(max_error, auto.PASS_SHARE, auto.MIN_SAMPLE)
+            sample = receivers if len(receivers) <= count else auto.calibration_sample(receivers, count)
+            points, normals = sample.positions, sample.normals
         errors = level_errors(device, mesh, light, points, normals, eps, meshes)
         bounds = [0.0 if level is mesh else upper_bound(e.wrong, e.receivers) for level, e in zip(meshes, errors)]
         chosen = max(i for i, b in enumerate(bounds) if b <= max_error)
@@ -346,13 +375,15 @@ def calibrate(device, mesh: Mesh, light, receiver_bounds, eps: float, max_error:
     return per_mesh[key]
 
 
-def resolve(device, mesh: Mesh, light, receiver_bounds, eps: float, lod, max_error=DEFAULT_MAX_ERROR) -> Mesh:
+def resolve(device, mesh: Mesh, light, receiver_bounds, eps: float, lod, max_error=DEFAULT_MAX_ERROR,
+            receivers=None) -> Mesh:
     """The occluder mesh a method should use for ``lod``: None gives ``mesh``; an int gives
     ``levels(mesh)[lod]``; ``"auto"`` gives the coarsest level whose measured error on a calibration
-    sample (:func:`calibrate`) is within ``max_error`` (a fraction of receivers, >= 0) with 99 % confidence.
+    sample (:func:`calibrate`, on ``receivers`` when given) is within ``max_error`` (a fraction of receivers,
+    >= 0) with 99 % confidence.
 
-    "auto" measures every level under this very light (0.2-1 s on the bench's models, then cached): for
-    a moving light, resolve once and pass the level index on, or accept a calibration per new light.
+    "auto" measures every level (0.2-1 s on the bench's models, plus building the levels), then reuses
+    the calibration for every light of the same direction bin (:func:`_light_bin`).
     """
     if not isinstance(mesh, Mesh):
         raise TypeError(f"mesh: expected a Mesh, got {type(mesh).__name__}")
@@ -363,7 +394,7 @@ def resolve(device, mesh: Mesh, light, receiver_bounds, eps: float, lod, max_err
     if isinstance(lod, str):
         if lod != "auto":
             raise ValueError(f"lod: expected None, a level index or 'auto', got {lod!r}")
-        return levels(mesh)[calibrate(device, mesh, light, receiver_bounds, eps, max_error).level]
+        return levels(mesh)[calibrate(device, mesh, light, receiver_bounds, eps, max_error, receivers).level]
     if isinstance(lod, bool) or not isinstance(lod, (int, np.integer)):
         raise TypeError(f"lod: expected None, a level index (int) or 'auto', got {type(lod).__name__} {lod!r}")
     meshes = levels(mesh)

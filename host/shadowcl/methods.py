@@ -57,6 +57,7 @@ METHODS = {
     "angular": "shadowcl.angular:AngularMethod",
     "shadow_volume": "shadowcl.shadow_volume:ShadowVolumeMethod",
     "voxel": "shadowcl.voxel:VoxelMethod",
+    "auto": "shadowcl.auto:AutoMethod",
 }
 
 EPS_FRACTION = 1e-4  # default eps as a fraction of the scene's bounding-box diagonal (DESIGN.md)
@@ -78,13 +79,19 @@ class Method(abc.ABC):
     eps_meaning: str | None = "as DESIGN.md: the segment starts eps along the normal and ignores hits within eps"
 
     def __init__(self, device, **params):
-        unknown = sorted(set(params) - set(self.parameters))
-        if unknown:
-            raise TypeError(f"{', '.join(unknown)}: not a parameter of method {self.name!r}; "
-                            f"it takes {sorted(self.parameters)}")
+        self.check_parameter_names(params)
         self.device = device
         self.params = {key: params.get(key, default) for key, (default, _) in self.parameters.items()}
         self.stats: dict = {}
+
+    @classmethod
+    def check_parameter_names(cls, params) -> None:
+        """``TypeError`` naming the ``params`` the method does not take (no device needed; their values
+        are checked by the constructor, which some methods give a device to read)."""
+        unknown = sorted(set(params) - set(cls.parameters))
+        if unknown:
+            raise TypeError(f"{', '.join(unknown)}: not a parameter of method {cls.name!r}; "
+                            f"it takes {sorted(cls.parameters)}")
 
     @abc.abstractmethod
     def prepare(self, occluders, light, receiver_bounds, eps: float) -> None:
@@ -152,6 +159,14 @@ def with_receiver_count(name: str, params: dict, count: int) -> dict:
     did not say: the one-shot calls know how many receivers are coming before they prepare."""
     if "expected_receivers" in method_class(name).parameters and params.get("expected_receivers") is None:
         return {**params, "expected_receivers": max(int(count), 1)}
+    return params
+
+
+def with_receivers(name: str, params: dict, receivers) -> dict:
+    """``params`` plus ``receivers=`` when method ``name`` calibrates on the caller's receivers ("auto") and
+    the caller did not say: the one-shot calls and the renderer know them before they prepare."""
+    if "receivers" in method_class(name).parameters and params.get("receivers") is None:
+        return {**params, "receivers": receivers}
     return params
 
 

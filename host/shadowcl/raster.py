@@ -50,8 +50,8 @@ BANDS = 64
 """Work-items sharing a big triangle, each drawing every BANDS-th row of its box."""
 
 STENCIL_MIN_GROUPS = 64
-"""The stencil's big triangles (a volume's long thin side quads, thousands of them) get one work-group
-(_BAND_GROUP bands) each, and more only while the launch has fewer than this many groups (balance over
+"""The stencil's big triangles (a volume's long thin side quads, thousands of them) get _BAND_GROUP bands
+each, and more only while their bands fill fewer than this many _BAND_GROUP-sized groups (balance over
 cores that other jobs share). With BANDS per triangle the bunny's 16 k side quads at 960 x 540 ran 1 M
 work-items, and their setup cost ~35 % of the stencil's fill (bench/stencil_profile.py); the camera
 and light passes keep BANDS: their few big triangles vary widely in size and need the finer split."""
@@ -63,7 +63,9 @@ _FILE = "raster.cl"
 _OPTIONS = (f"-DSUBPIXEL_BITS={SUBPIXEL_BITS}", f"-DGUARD_BAND={GUARD_BAND}", f"-DMAX_CORNERS={MAX_CORNERS}",
             f"-DBIG_BOX={BIG_BOX}")
 _GROUP = 64  # work-group size; global sizes are rounded up to it and kernels guard gid >= n
-_BAND_GROUP = 8  # bands of a big triangle per work-group: its BANDS work-items spread over cores
+_BAND_GROUP = 8  # the stencil's bands of a big triangle come in multiples of this
+# raster_pass's pass argument (kernels/raster.cl, enum pass)
+_DEPTH_PASS, _TRIANGLE_PASS, _COUNT_PASS, _ZFAIL_STENCIL_PASS, _ZPASS_STENCIL_PASS = range(5)
 _EMPTY = np.uint32(0xFFFFFFFF)  # no triangle; reads back as int32 -1
 
 
@@ -169,7 +171,7 @@ def rasterize(device: Device, mesh: Mesh, view: View) -> ZBuffer:
     setup = _setup(device, mesh, view)
     depth = _depth_pass(device, setup, view)
     triangle_dev = _image(device, view, _EMPTY, "triangle buffer")
-    _draw(device, "raster_triangle", setup, view, depth.buffer, triangle_dev)
+    _draw(device, _TRIANGLE_PASS, setup, view, triangle_dev, depth.buffer)
     return ZBuffer(depth.read(), device.from_device(triangle_dev, depth.shape, np.int32), view, mesh,
                    depth.buffer, triangle_dev)
 
@@ -187,7 +189,7 @@ def depth_map(device: Device, mesh: Mesh, view: View, triangles: bool = False) -
     if not triangles:
         return depth
     triangle_dev = _image(device, view, _EMPTY, "triangle buffer")
-    _draw(device, "raster_triangle", setup, view, depth.buffer, triangle_dev)
+    _draw(device, _TRIANGLE_PASS, setup, view, triangle_dev, depth.buffer)
     return DepthMap(depth.buffer, view, device, triangle_dev)
 
 
@@ -206,7 +208,7 @@ def coverage_count(device: Device, mesh: Mesh, view: View) -> np.ndarray:
     _check(mesh, view)
     setup = _setup(device, mesh, view)
     count_dev = _image(device, view, 0, "count buffer")
-    _draw(device, "raster_count", setup, view, count_dev)
+    _draw(device, _COUNT_PASS, setup, view, count_dev)
     return device.from_device(count_dev, (view.height, view.width), np.uint32)
 
 
@@ -242,9 +244,9 @@ def stencil(device: Device, volumes: Mesh, view: View, zbuffer: ZBuffer, zfail: 
         depth_dev = device.to_device(np.ascontiguousarray(surface) + np.float32(0))   # + 0: no -0.0 bits
     setup = _setup(device, volumes, view)
     stencil_dev = _image(device, view, np.int32(initial).view(np.uint32), "stencil buffer")
-    launch = device.kernel(_FILE, "raster_stencil", _OPTIONS + (f"-DSTENCIL_ZFAIL={int(bool(zfail))}",))
     groups = min(-(-STENCIL_MIN_GROUPS // max(setup.big_count, 1)), BANDS // _BAND_GROUP)   # per big triangle
-    _draw(device, launch, setup, view, depth_dev, stencil_dev, bands=groups * _BAND_GROUP)
+    _draw(device, _ZFAIL_STENCIL_PASS if zfail else _ZPASS_STENCIL_PASS, setup, view, stencil_dev, depth_dev,
+          bands=groups * _BAND_GROUP)
     return device.from_device(stencil_dev, (view.height, view.width), np.int32)
 
 
@@ -369,23 +371,24 @@ def _setup(device: Device, mesh: Mesh, view: View) -> _Setup:
 def _depth_pass(device: Device, setup: _Setup, view: View) -> DepthMap:
     """The nearest depth of every pixel of ``view`` from the triangles of ``setup``."""
     buffer = _image(device, view, 0, "depth buffer")
-    _draw(device, "raster_depth", setup, view, buffer)
+    _draw(device, _DEPTH_PASS, setup, view, buffer)
     return DepthMap(buffer, view, device)
 
 
-def _draw(device: Device, kernel, setup: _Setup, view: View, *images: cl.Buffer, bands: int = BANDS) -> None:
-    """Run raster pass ``kernel`` (a name built with the common options, or a built kernel) into
-    ``images``: every triangle by one work-item, except big ones, shared by ``bands`` work-items (a
-    multiple of _BAND_GROUP) so that they spread over the compute units. Which work-item draws a row
-    changes nothing drawn: the passes' atomics commute."""
-    launch = device.kernel(_FILE, kernel, _OPTIONS) if isinstance(kernel, str) else kernel
-    for n, bands, local in ((setup.triangles, 1, (_GROUP, 1)), (setup.big_count, bands, (1, _BAND_GROUP))):
-        if n:
-            launch(
-                device.queue, (_rounded(n, local[0]), bands), local,
-                setup.big, np.int32(n), setup.count, setup.xy, setup.depth,
-                np.int32(view.width), np.int32(view.height), *images,
-            )
+def _draw(device: Device, pass_: int, setup: _Setup, view: View, target: cl.Buffer,
+          depth_bits: "cl.Buffer | None" = None, bands: int = BANDS) -> None:
+    """Run raster pass ``pass_`` (one of the _*_PASS values) into ``target``, reading ``depth_bits``
+    (the triangle and stencil passes): every triangle by one work-item, except big ones, shared by
+    ``bands`` work-items so that they spread over the compute units. One launch of one kernel with one
+    local size, so that PoCL compiles one work-group function for every pass. Which work-item draws
+    a row changes nothing drawn: the passes' atomics commute."""
+    work_items = setup.triangles + setup.big_count * bands
+    device.kernel(_FILE, "raster_pass", _OPTIONS)(
+        device.queue, (_rounded(work_items),), (_GROUP,),
+        setup.big, np.int32(setup.triangles), np.int32(setup.big_count), np.int32(bands), setup.count,
+        setup.xy, setup.depth, np.int32(view.width), np.int32(view.height), np.int32(pass_), target,
+        target if depth_bits is None else depth_bits,
+    )
 
 
 def _image(device: Device, view: View, value, what: str) -> cl.Buffer:

@@ -21,7 +21,7 @@ from .checks import available_host_bytes, check_memory, positive_int
 from .device import get_device
 from .geometry import bounds_diagonal
 from .lights import check_light, same_light
-from .methods import method_class, resolve_eps, with_receiver_count
+from .methods import method_class, resolve_eps, with_receiver_count, with_receivers
 from .points import check_points
 from .scene import MAX_RENDER_SIDE, Scene
 from .shadows import Shadows
@@ -52,6 +52,7 @@ class RenderResult:
     visibility: np.ndarray  # (L, M) float32 in [0, 1], what shading used (1 - shadow for boolean methods)
     timings: dict[str, float] = field(default_factory=dict)  # seconds per stage
     reused: dict = field(default_factory=dict)  # what a Renderer kept from its last frame (see Renderer)
+    shadows: list = field(default_factory=list)  # per light, the prepared Shadows (params, stats: what "auto" chose)
 
     @property
     def covered(self) -> np.ndarray:
@@ -185,6 +186,7 @@ class Renderer:
                     visibility = np.stack([_box_filter(seen, v, self.post_filter) for v in visibility])
                 image = shade(self.scene.triangle_colors, lights, view, seen, visibility)
             result = RenderResult(image=image, receivers=seen, shadow=shadow, visibility=visibility, timings=timings)
+        result.shadows = list(slots)
         result.reused = {"camera": bool(reused_camera and not own),
                          "prepared": [not fresh for fresh in prepared]}
         self.report = result
@@ -200,6 +202,8 @@ class Renderer:
             else:
                 count = self.width * self.height if self._camera is None else len(self._camera[3])
                 params = with_receiver_count(self.method, self._params, count)   # sized by the first frame
+                if self._camera is not None:                                       # "auto" calibrates on them
+                    params = with_receivers(self.method, params, self._camera[3])
                 self._slots.append(Shadows(self.scene, light, self.method, self.scene.bounds, self.device, self._eps_given,
                                            **params))
         return True

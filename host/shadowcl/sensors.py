@@ -36,9 +36,12 @@ def scene_sensors(scene, spacing: float | None = None, up=(0.0, 1.0, 0.0)) -> li
     ``spacing`` when given. Raises ``ValueError`` when the scene has none."""
     if not scene.sensors:
         raise ValueError(f"scene {scene.name!r}: has no [[sensors]] grids")
+    if spacing is not None and not (np.isfinite(spacing) and spacing > 0):
+        raise ValueError(f"spacing: must be a positive distance, got {spacing}")
     meshes = dict(scene.objects)
     return [SensorGrid(spec["name"], *grid_on_faces([meshes[name] for name in spec["objects"]],
-                                                     spacing or spec["spacing"], spec["offset"], up))
+                                                     spec["spacing"] if spacing is None else spacing,
+                                                     spec["offset"], up))
             for spec in scene.sensors]
 
 

@@ -277,6 +277,8 @@ class ShadowVolumeMethod(Method):
         "silhouettes": ("brute", "silhouette edges per frame: 'brute' (every edge on the device), 'tracking' (face "
                                  "walks from last frame's silhouette) or 'random' (Markosian's randomized search)"),
         "max_error": (0.001, "lod='auto': largest fraction of receivers whose shadow may change"),
+        "receivers": (None, "lod='auto': the receivers to calibrate on (points, (points, normals) or a Points); "
+                            "shadow_mask and render pass theirs; None: points on the mesh in the bounds"),
         "stencil": ("zfail", "render's stencil: 'zfail' (Everitt-Kilgard, robust to the near plane) or 'zpass' "
                              "(refused when the near plane cuts a volume face)"),
     }
@@ -292,6 +294,8 @@ class ShadowVolumeMethod(Method):
         self.silhouettes = choice("silhouettes", p["silhouettes"], TRACKER_METHODS)
         self.stencil = choice("stencil", p["stencil"], STENCILS)
         self.max_error = non_negative_float("max_error", p["max_error"])
+        from .auto import calibration_receivers
+        self.receivers = calibration_receivers(p["receivers"])
         self._tracker: SilhouetteTracker | None = None
         self._tracked: Mesh | None = None
         self._prepared = False
@@ -305,7 +309,8 @@ class ShadowVolumeMethod(Method):
             occluders = mesh
         else:
             from . import lod as lod_module              # imported on use: fast-simplification is optional
-            occluders = lod_module.resolve(self.device, mesh, light, box, eps, self.lod, self.max_error)
+            occluders = lod_module.resolve(self.device, mesh, light, box, eps, self.lod, self.max_error,
+                                           self.receivers)
         t1 = time.perf_counter()
         prepared = two_sided(occluders)
         # the flipped copies are open components, so the prepared mesh's closed ones are the original's
@@ -319,6 +324,10 @@ class ShadowVolumeMethod(Method):
             occluder_triangles=len(occluders.faces), two_sided_triangles=len(prepared.mesh.faces),
             detached_faces=len(prepared.detached_faces), light_inside_closed=inside,
             lod_s=t1 - t0, prepare_s=time.perf_counter() - t0)
+
+    def resolved_params(self) -> dict:
+        """The parameters as used, ``receivers`` as their count (not the points)."""
+        return {**self.params, "receivers": None if self.receivers is None else f"{len(self.receivers):,} receivers"}
 
     def _require_prepared(self, what: str) -> None:
         if not self._prepared:

@@ -33,12 +33,25 @@ def sun_times(start, end, step="1h", timezone: str = "UTC"):
     if not step > pd.Timedelta(0):
         raise ValueError(f"step: must be positive, got {step}")
     try:
-        times = pd.date_range(pd.Timestamp(start), pd.Timestamp(end), freq=step, inclusive="left")
+        # start and end localised first, then stepped as aware times: naive times stepped then localised
+        # would hit the clock change's nonexistent (spring) and ambiguous (autumn) local times
+        start, end = (_aware(pd.Timestamp(time), timezone) for time in (start, end))
+        times = pd.date_range(start, end, freq=step, inclusive="left")
     except (TypeError, ValueError) as error:
-        raise ValueError(f"start, end: not a period ({error})") from None
+        raise ValueError(f"start, end: not a period in timezone {timezone!r} ({error})") from None
     if len(times) == 0:
         raise ValueError(f"start, end: the period from {start} to {end} is empty")
-    return times.tz_localize(timezone) if times.tz is None else times
+    return times
+
+
+def _aware(time, timezone: str):
+    """``time`` in ``timezone`` when it carries none (a naive time on a clock change: the later one)."""
+    if time.tz is not None:
+        return time
+    try:
+        return time.tz_localize(timezone, nonexistent="shift_forward", ambiguous=False)
+    except KeyError:                                     # zoneinfo's and pytz's unknown-zone errors
+        raise ValueError(f"timezone: unknown time zone {timezone!r}") from None
 
 
 def sun_positions(latitude: float, longitude: float, times, altitude: float = 0.0):

@@ -24,13 +24,15 @@ HEAT_MAP_PIXELS = 1600   # the heat map's longer side at most, in pixels
 @dataclass(frozen=True)
 class SunHours:
     """A study's result: per sensor ``hours`` (N,) float64, its ``points`` (N, 3) and the ``grid``
-    name of each (N,); ``steps`` sun-up time steps of ``step_hours`` each."""
+    name of each (N,); ``steps`` sun-up time steps of ``step_hours`` each; the scene's ``north``
+    (for the heat map's orientation)."""
 
     points: np.ndarray
     grid: np.ndarray
     hours: np.ndarray
     steps: int
     step_hours: float
+    north: tuple = NORTH
 
 
 def sun_hours(scene, latitude, longitude, start, end, step="1h", timezone="UTC", north=NORTH, spacing=None,
@@ -49,11 +51,11 @@ def sun_hours(scene, latitude, longitude, start, end, step="1h", timezone="UTC",
 
     step_hours = pd.Timedelta(step) / pd.Timedelta("1h")
     if len(elevation) == 0:
-        return SunHours(points, names, np.zeros(len(points)), 0, step_hours)
+        return SunHours(points, names, np.zeros(len(points)), 0, step_hours, tuple(north))
     suns = [DirectionalLight(d) for d in light_directions(elevation, azimuth, UP, north)]
     shadowed = shadow_counts(scene, suns, points, normals, method=method, client=client, progress=progress,
                              weights=np.full(len(suns), step_hours), **params)
-    return SunHours(points, names, len(suns) * step_hours - shadowed, len(suns), step_hours)
+    return SunHours(points, names, len(suns) * step_hours - shadowed, len(suns), step_hours, tuple(north))
 
 
 def write(result: SunHours, png: Path) -> list[Path]:
@@ -66,18 +68,24 @@ def write(result: SunHours, png: Path) -> list[Path]:
         file.write("grid,x,y,z,hours\n")
         for name, (x, y, z), hours in zip(result.grid, result.points, result.hours):
             file.write(f"{name},{x:.6g},{y:.6g},{z:.6g},{hours:.17g}\n")
-    heat_map(result.points, result.hours, png, f"direct sun hours over {result.steps} sun-up steps")
+    heat_map(result.points, result.hours, png, f"direct sun hours over {result.steps} sun-up steps", north=result.north)
     return [npy, csv, png]
 
 
 def heat_map(points: np.ndarray, hours: np.ndarray, path: Path, title: str, up=UP, north=NORTH) -> None:
-    """A PNG of ``hours`` seen from above (north up, east right): each pixel shows the highest sensor
-    in it, in a colormap with a colour bar in hours; pixels without a sensor stay blank."""
-    import matplotlib
+    """A PNG of ``hours`` seen from above, the scene's ``north`` (made perpendicular to ``up``) up and
+    east right: each pixel shows the highest sensor in it, in a colormap with a colour bar in hours;
+    pixels without a sensor stay blank."""
+    try:
+        import matplotlib
+    except ImportError:
+        raise ImportError("heat map: matplotlib is not installed (pip install 'shadowcl[sun]')") from None
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    up, north = np.asarray(up, float), np.asarray(north, float)
+    up = np.asarray(up, float) / np.linalg.norm(up)
+    north = np.asarray(north, float) - np.dot(north, up) * up
+    north /= np.linalg.norm(north)
     east = np.cross(north, up)
     x, y, height = points @ east, points @ north, points @ up
     span = max(np.ptp(x), np.ptp(y), 1e-9)
