@@ -25,6 +25,7 @@
  *   INPUT_F64     1 receivers are world float64 (moved into the frame here, in double), 0 frame float32
  */
 #include "vecmath.h"
+#include "lists.h"
 
 #ifndef LIGHT_POINT
 #define LIGHT_POINT 1
@@ -291,27 +292,10 @@ INLINE bool record_before(const __global float *rec, int a, int b, bool by_loop)
     return ra[0] < rb[0];
 }
 
-/* In-place heapsort of n records (O(n log n), no scratch). */
-INLINE void heapsort_records(__global float *rec, int n, bool by_loop)
-{
-    for (int start = n / 2 - 1, end = n; end > 1;) {
-        int root;
-        if (start >= 0) {
-            root = start--;
-        } else {
-            swap_records(rec, 0, --end);
-            root = 0;
-        }
-        for (int child = 2 * root + 1; child < end; child = 2 * root + 1) {
-            if (child + 1 < end && record_before(rec, child, child + 1, by_loop)) ++child;
-            if (!record_before(rec, root, child, by_loop)) break;
-            swap_records(rec, root, child);
-            root = child;
-        }
-    }
-}
+#define RECORD_BEFORE(rec, by_loop, a, b) record_before(rec, a, b, by_loop)
+SC_DEFINE_SEGMENT_SORT(sort_records, __global float *, bool, RECORD_BEFORE, swap_records)
 
-/* sort_rows: one work-item per row; heapsort of the row's records by s_lo, then the running maximum of
+/* sort_rows: one work-item per row; sort of the row's records by s_lo, then the running maximum of
  * s_hi into each record's last float. */
 __kernel void sort_rows(const __global int *offsets, const int rows, __global float *records)
 {
@@ -319,7 +303,7 @@ __kernel void sort_rows(const __global int *offsets, const int rows, __global fl
     if (k >= rows) return;
     __global float *rec = records + (size_t)REC * offsets[k];
     const int n = offsets[k + 1] - offsets[k];
-    heapsort_records(rec, n, false);
+    sort_records(rec, false, n);
     /* r[7]: running maximum of s_hi along the row, so a lookup can stop scanning backwards */
     float run = -2.0f;
     for (int j = 0; j < n; ++j) {
@@ -506,7 +490,7 @@ __kernel void pair_rows(const __global int *offsets, const int rows, const float
     __global float *c = crossings + (size_t)REC * base;
     __global float *out = pairs + (size_t)REC * cap * base;
     __global int *q = queue + base;
-    heapsort_records(c, n, true);
+    sort_records(c, true, n);
     const float tk = t0 + ((float)k + 0.5f) * dt;
     int p = 0;
     for (int g = 0; g < n;) {

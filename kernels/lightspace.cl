@@ -19,10 +19,11 @@
  * LS_COARSE fine cells on either axis puts the primitive in the coarse grid (lightspace.h).
  *
  * Build options: CORNERS, NVIEWS, PERSPECTIVE (lightspace.h).
- * Lists: CSR (ls_csr's count, which also records each primitive's cells as a bit mask, scan_*, then
+ * Lists: CSR (ls_csr's count, which also records each primitive's cells as a bit mask, lists.h's scan, then
  * ls_csr's fill, which replays the masks instead of projecting again) or linked (ls_fill_linked).
  */
 #include "lightspace.h"
+#include "lists.h"        /* scan_block_sums, scan_blocks */
 
 #ifndef CORNERS
 #define CORNERS 3
@@ -405,48 +406,6 @@ __kernel void ls_fill_linked(__global const float *prims, int nprims, __constant
             nodes[2 * node + 1] = atomic_xchg(heads + cell, node);
         }
     })
-}
-
-/* Exclusive prefix sum in two launches, each work-item scanning a block serially (no local memory,
- * no barriers: DESIGN.md item 13). sums gets one long per block, then the total. */
-__kernel void scan_block_sums(__global const int *counts, int n, int block, __global long *sums)
-{
-    const int g = get_global_id(0);
-    const int start = g * block;
-    if (start >= n)
-        return;
-    const int end = min(n, start + block);
-    long s = 0;
-    for (int i = start; i < end; ++i)
-        s += counts[i];
-    sums[g] = s;
-}
-
-/* offsets[i] = sum of counts[0..i); offsets[n] = total, and sums[nblocks] = total (long). Work-item g
- * adds up the block sums before its block itself (at most SCAN_BLOCKS of them: cheaper than a third
- * kernel, whose first launch alone costs a compile on PoCL). Valid when the total fits an int (host
- * checks). */
-__kernel void scan_blocks(__global const int *counts, int n, int block, __global long *sums,
-                          __global int *offsets, int nblocks)
-{
-    const int g = get_global_id(0);
-    const int start = g * block;
-    if (start >= n)
-        return;
-    long before = 0;
-    for (int k = 0; k < g; ++k)
-        before += sums[k];
-    const int end = min(n, start + block);
-    int run = (int)before;
-    for (int i = start; i < end; ++i) {
-        offsets[i] = run;
-        run += counts[i];
-    }
-    if (g == nblocks - 1) {
-        const long total = before + sums[g];
-        offsets[n] = (int)total;
-        sums[nblocks] = total;
-    }
 }
 
 /* Cells of each point (tests and tools): fine[i], coarse[i] cell indices; ws[i] = W (<= 0: behind a

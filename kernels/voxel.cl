@@ -14,6 +14,7 @@
 #include "subdivision.h"
 #include "lightspace.h"
 #include "ray_triangle.h"
+#include "lists.h"
 
 #ifndef LIGHT_POINT
 #define LIGHT_POINT 1
@@ -99,25 +100,18 @@ __kernel void leaf_geometry(__global const uint *leaves, int nleaves, __global c
     keys[l] = to_light(mx, my, mz, lx, ly, lz, &bx, &by, &bz);
 }
 
+#define ITEM_NEARER(items, keys, i, j) (keys[items[i]] < keys[items[j]])
+#define SWAP_ITEMS(items, i, j) { const int item_ = items[i]; items[i] = items[j]; items[j] = item_; }
+SC_DEFINE_SEGMENT_SORT(sort_items, __global int *, __global const float *, ITEM_NEARER, SWAP_ITEMS)
+
 /* Sorts each cell's list (CSR offsets/items over ncells cells) by keys[item], nearest the light first:
- * a shadowed sample's walk then usually stops at its first test (section 4.2). Insertion sort: lists
- * are short. */
+ * a shadowed sample's walk then usually stops at its first test (section 4.2). */
 __kernel void sort_lists(__global const int *offsets, __global int *items, int ncells, __global const float *keys)
 {
     const int cell = get_global_id(0);
     if (cell >= ncells)
         return;
-    const int begin = offsets[cell], end = offsets[cell + 1];
-    for (int i = begin + 1; i < end; ++i) {
-        const int item = items[i];
-        const float key = keys[item];
-        int j = i - 1;
-        while (j >= begin && keys[items[j]] > key) {
-            items[j + 1] = items[j];
-            --j;
-        }
-        items[j + 1] = item;
-    }
+    sort_items(items + offsets[cell], keys, offsets[cell + 1] - offsets[cell]);
 }
 
 /* 1 when some corner voxel of leaf q is within one voxel (Chebyshev) of voxel (i, j, k): q is the

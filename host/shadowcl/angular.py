@@ -17,7 +17,7 @@ Pipeline (kernels/angular.cl):
    centre it spans (first row, count); the records per row and their exclusive prefix sum on the host (a
    difference array over the faces' row intervals: per-row atomic counters on the device contended on a
    few hundred addresses, 0.45 s for 600 k faces); a fill pass writing one record per (face, row) at its
-   row's offset plus an atomic cursor, then a heapsort of each row by ``s_lo``
+   row's offset plus an atomic cursor, then a sort of each row by ``s_lo`` (kernels/lists.h)
    (the paper's pairwise sort). A record is the face's span ``[s_lo, s_hi]`` in the row -- the paper's
    pair of crossings: a ridge-edge crossing where the face touches a loop, a visible-edge crossing
    otherwise, so visible edges enter "in duplicate" (section 5) -- plus the face plane for depth. Pairs

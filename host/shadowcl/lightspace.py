@@ -66,6 +66,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pyopencl as cl
 
+from . import lists
 from .checks import positive_int
 from .lights import DirectionalLight, PointLight
 
@@ -80,7 +81,6 @@ SMALL_FRACTION = 1.0 / 16   # a primitive projecting wider than this share of th
 CELLS_PER_PRIM = 2          # cells per primitive (measured: pick_cell_count)
 RECEIVERS_PER_CELL = 16     # receivers per cell (measured: pick_cell_count)
 MAX_FOV_DEGREES = 120.0     # widest single perspective view before the cube is used
-SCAN_BLOCKS = 512           # work-items of the prefix sum
 CUBE_FACES = ((0, 1.0), (0, -1.0), (1, 1.0), (1, -1.0), (2, 1.0), (2, -1.0))   # (axis, sign) +x -x +y -y +z -z
 
 
@@ -445,17 +445,8 @@ class ListBuilder:
         return lists
 
     def prefix_sum(self, grid: Grid, counts: cl.Buffer, n: int, offsets: cl.Buffer) -> int:
-        """offsets = exclusive prefix sum of counts (n + 1 entries); returns the total."""
-        dev, queue = self.device, self.device.queue
-        block = max(1024, -(-n // SCAN_BLOCKS))
-        nblocks = -(-n // block)
-        sums = dev.scratch("lightspace: scan block sums", 8 * (nblocks + 1))
-        args = (counts, np.int32(n), np.int32(block))
-        self._kernel(grid, "scan_block_sums")(queue, (nblocks,), None, *args, sums)
-        self._kernel(grid, "scan_blocks")(queue, (nblocks,), None, *args, sums, offsets, np.int32(nblocks))
-        total = np.empty(1, np.int64)
-        cl.enqueue_copy(queue, total, sums, src_offset=8 * nblocks)
-        return int(total[0])
+        """offsets = exclusive prefix sum of counts (n + 1 entries); returns the total (:func:`lists.prefix_sum`)."""
+        return lists.prefix_sum(self.device, lambda name: self._kernel(grid, name), counts, n, offsets)
 
 
 def check_dropped(device, dropped: cl.Buffer, what: str) -> None:

@@ -121,7 +121,7 @@ from .geometry import Mesh, bounds_diagonal
 from .lights import check_light
 from .methods import Method
 from .points import BOUNDS_SLACK, check_points
-from .views import View
+from .views import View, window_orthographic, window_perspective
 
 BIASES = ("constant", "slope", "normal", "plane")
 FILTERS = ("nearest", "bilinear", "pcf")
@@ -377,41 +377,23 @@ def _view(fitted: lightspace.LightViews, k: int, origin: np.ndarray, corners: np
     ``corners`` (relative to ``origin``) bound every occluder and receiver: they set the depth range,
     and the near plane of a single perspective view; ``near`` is the cube's.
     """
-    right, up, forward = fitted.axes[k]
+    forward = fitted.axes[k][2]
     u0, u1, v0, v1 = _square(fitted.windows[k])
     size = u1 - u0
-    # Screen x = (2 u - (u0 + u1)) / size, likewise y, with u = p.right (orthographic) or
-    # u = d.right / d.forward (perspective, d from the eye); the rows below are that, times w.
-    matrix = np.zeros((4, 4))
     if fitted.perspective:
-        eye = fitted.eye
-        matrix[0, :3] = (2 * right - (u0 + u1) * forward) / size
-        matrix[1, :3] = (2 * up - (v0 + v1) * forward) / size
-        matrix[3, :3] = forward
-        matrix[:, 3] = -matrix[:, :3] @ eye
+        far_ahead = None
         if near is None:   # the box is in front of a single view: its corners bound every occluder
-            # depth = near (far - w) / (w (far - near)), w the distance along the axis: 1 at near, 0 at
-            # far, with far - w = (far + forward.eye) - forward.p a difference of scene-sized numbers, so
-            # a light 1e6 scene sizes away still ranks the scene's surfaces (near / w alone would put
-            # them all within 1e-6 of 1, a few float32 steps).
             t = corners @ forward
             margin = 1e-3 * max(float(t.max() - t.min()), 1e-6 * scale)
-            near = max(0.99 * float((t - forward @ eye).min()), 1e-6 * scale)
+            near = max(0.99 * float((t - forward @ fitted.eye).min()), 1e-6 * scale)
             far_ahead = float(t.max()) + margin                # far + forward.eye: scene-sized
-            far = far_ahead - float(forward @ eye)
-            k = near / (far - near)
-            matrix[2, :3], matrix[2, 3] = -k * forward, k * far_ahead
-        else:
-            far = math.inf
-            matrix[2, 3] = near                          # depth = near / distance
+        far = math.inf if far_ahead is None else far_ahead - float(forward @ fitted.eye)
+        matrix = window_perspective(fitted.axes[k], (u0, u1, v0, v1), fitted.eye, near, far_ahead)
     else:
         t = corners @ forward
         margin = 1e-3 * max(float(t.max() - t.min()), 1e-6 * scale)
         near, far = float(t.min()) - margin, float(t.max()) + margin
-        matrix[0, :3], matrix[0, 3] = 2 * right / size, -(u0 + u1) / size
-        matrix[1, :3], matrix[1, 3] = 2 * up / size, -(v0 + v1) / size
-        matrix[2, :3], matrix[2, 3] = -forward / (far - near), far / (far - near)   # depth = (far - t) / (far - near)
-        matrix[3, 3] = 1.0
+        matrix = window_orthographic(fitted.axes[k], (u0, u1, v0, v1), near, far)
     record = np.zeros(VIEW_FLOATS, dtype=np.float32)
     record[:16] = matrix.ravel()
     record[16:20] = size / resolution, near, min(far, np.finfo(np.float32).max), near / far if fitted.perspective else 0

@@ -42,15 +42,51 @@ def perspective_reversed_infinite(fov_y_degrees: float, aspect: float, near: flo
 
 def orthographic_reversed(half_width: float, half_height: float, near: float, far: float) -> np.ndarray:
     """Projection with depth 1 at ``near`` and 0 at ``far`` along the view axis (-z)."""
-    return np.array(
-        [
-            [1 / half_width, 0, 0, 0],
-            [0, 1 / half_height, 0, 0],
-            [0, 0, 1 / (far - near), far / (far - near)],
-            [0, 0, 0, 1],
-        ],
-        dtype=np.float64,
-    )
+    axes = np.array([[1.0, 0, 0], [0, 1.0, 0], [0, 0, -1.0]])
+    return window_orthographic(axes, (-half_width, half_width, -half_height, half_height), near, far)
+
+
+def window_orthographic(axes: np.ndarray, window, near: float, far: float) -> np.ndarray:
+    """Orthographic projection of the ``window`` (u0, u1, v0, v1) seen along ``axes``.
+
+    ``axes`` rows are right, up and forward; u = p.right, v = p.up and t = p.forward for a position p,
+    all in scene units. Screen x = (2 u - (u0 + u1)) / (u1 - u0), likewise y; depth = (far - t) /
+    (far - near), 1 at ``near`` and 0 at ``far``.
+    """
+    right, up, forward = axes
+    u0, u1, v0, v1 = window
+    matrix = np.zeros((4, 4))
+    matrix[0, :3], matrix[0, 3] = 2 * right / (u1 - u0), -(u0 + u1) / (u1 - u0)
+    matrix[1, :3], matrix[1, 3] = 2 * up / (v1 - v0), -(v0 + v1) / (v1 - v0)
+    matrix[2, :3], matrix[2, 3] = -forward / (far - near), far / (far - near)
+    matrix[3, 3] = 1.0
+    return matrix
+
+
+def window_perspective(axes: np.ndarray, window, eye: np.ndarray, near: float,
+                       far_ahead: float | None = None) -> np.ndarray:
+    """Perspective projection from ``eye`` of the ``window`` (u0, u1, v0, v1) in tangent units.
+
+    ``axes`` rows are right, up and forward; for d = p - eye, u = d.right / d.forward, likewise v with
+    up, and w = d.forward the distance along the axis. Screen x = (2 u - (u0 + u1)) / (u1 - u0), likewise
+    y. Without ``far_ahead`` depth = near / w (0 at infinity). With it (``far_ahead`` = far +
+    forward.eye) depth = near (far - w) / (w (far - near)), 1 at near and 0 at far, where far - w =
+    far_ahead - forward.p is a difference of scene-sized numbers: a light 1e6 scene sizes away still
+    ranks the scene's surfaces (near / w alone would put them all within 1e-6 of 1, a few float32 steps).
+    """
+    right, up, forward = axes
+    u0, u1, v0, v1 = window
+    matrix = np.zeros((4, 4))
+    matrix[0, :3] = (2 * right - (u0 + u1) * forward) / (u1 - u0)
+    matrix[1, :3] = (2 * up - (v0 + v1) * forward) / (v1 - v0)
+    matrix[3, :3] = forward
+    matrix[:, 3] = -matrix[:, :3] @ eye
+    if far_ahead is None:
+        matrix[2, 3] = near
+    else:
+        k = near / (far_ahead - float(forward @ eye) - near)
+        matrix[2, :3], matrix[2, 3] = -k * forward, k * far_ahead
+    return matrix
 
 
 @dataclass(frozen=True)
