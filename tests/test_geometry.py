@@ -232,3 +232,18 @@ def test_prepared_method_parameters_are_copies():
     shadows = sc.prepare(SubdivisionSurface(cube, faces), LIGHT, method="voxel", grid_bounds=grid_bounds, resolution=16)
     grid_bounds[:] = 0
     np.testing.assert_array_equal(shadows.params["grid_bounds"], [[-1, 0, -1], [2, 3, 2]])
+
+
+def test_moved_mesh_is_kept_and_its_bounds_equal_recomputed_ones():
+    """Mesh.moved: the same (centre, scale) gives the same object; its seeded bounds equal the bounds
+    computed from its vertices (only referenced vertices count), for awkward centres and scales."""
+    rng = np.random.default_rng(5)
+    vertices = rng.normal(size=(50, 3)) * 1e3 + 7e5
+    vertices[0] = 1e9                                  # unreferenced: outside every face
+    mesh = sc.Mesh(vertices, rng.integers(1, 50, (40, 3)))
+    for centre, scale in ((np.array([7e5, 7e5, 7e5]), 2.0 ** 11), (np.array([0.1, -3.3, 1e-7]), 2.0 ** -20)):
+        moved = mesh.moved(centre, scale)
+        assert mesh.moved(centre.copy(), scale) is moved
+        used = moved.vertices[np.unique(moved.faces)].astype(np.float64)
+        assert np.array_equal(moved.bounds, np.stack([used.min(0), used.max(0)]))
+        assert np.array_equal(moved.vertices, ((mesh.vertices.astype(np.float64) - centre) / scale).astype(np.float32))

@@ -63,10 +63,7 @@ class Frame:
         return float(distance) / self.scale
 
     def mesh(self, mesh: Mesh) -> Mesh:
-        matrix = np.eye(4) / self.scale
-        matrix[:3, 3] = -self.centre / self.scale
-        matrix[3, 3] = 1.0
-        return mesh.transformed(matrix)
+        return mesh.moved(self.centre, self.scale)
 
     def view(self, view):
         """A camera :class:`~shadowcl.views.View` in the frame: the same clip coordinates for the same points."""
