@@ -198,7 +198,7 @@ def touching_lights(v, f):
 
 @pytest.mark.parametrize("method", METHODS)
 def test_lights_touching_the_occluders(scene, method):
-    """Right (exact, shadow map) or refused naming the light (angular, shadow volume: their clearance)."""
+    """Right (exact) or refused naming the light (angular, shadow volume, shadow map: their clearance)."""
     v, f, points, normals = scene
     mesh = sc.Mesh(v, f)
     clearance = method_class(method).min_light_clearance
@@ -298,7 +298,7 @@ def test_fuzz_right_or_a_clear_error(method, occluder, log_scale, offset, placem
         # near or inside the occluders for the methods that declare a clearance or refuse a light inside;
         # far receivers of a point light used as directional beyond the method's reach.
         allowed = set()
-        if method in ("angular", "shadow_volume") and placement in ("on a vertex", "near a face", "inside"):
+        if method in ("angular", "shadow_volume", "shadow_map") and placement in ("on a vertex", "near a face", "inside"):
             allowed.add("light")
         if far_receivers and placement in ("far", "very far"):
             allowed.add("points")

@@ -164,6 +164,7 @@ class ShadowMapMethod(Method):
 
     name = "shadow_map"
     point_light_reach = 2.0 ** 21   # measured (bench/range.py): right to 3e6 scene sizes, 2 of 1,500 wrong at 1e7
+    min_light_clearance = 3e-4      # measured on an icosphere over a ground (12 lights 1.1e-7..1.1e-4 of the diagonal off a face): 3-4 of 12 wrong from 3.4e-7 to 3.4e-5, all right at 1.1e-4
     bounded = True
     parameters = {
         "resolution": (None, f"texels per side of each (square) depth map; None picks {DEFAULT_RESOLUTION}"),
