@@ -42,6 +42,10 @@ method; bench/silhouettes.py measures their time and recall.
 
 Modules: :mod:`.classify` (facing and brute-force edge codes), :mod:`.loops` (closed oriented loops),
 :mod:`.tracking` (:class:`SilhouetteTracker`); the edge adjacency is :mod:`shadowcl.topology`'s.
+
+One name, three rooms: this package is the host room of ``kernels/silhouette.cl`` (a package, split by job,
+where other names have one module); its NumPy reference is ``reference/silhouette.py``, its tests
+``tests/test_silhouette.py``.
 """
 
 from ..topology import EdgeAdjacency, edge_adjacency

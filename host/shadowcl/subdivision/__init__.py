@@ -29,6 +29,10 @@ ignored: every surface uses the rules above.
 Modules, one job each: :mod:`.refinement` (polygon topology, one Catmull-Clark step, limit weights),
 :mod:`.stam` (patch control nets, Stam's sub-domains), :mod:`.patches` (the patch table),
 :mod:`.surface` (:class:`SubdivisionSurface`: checks, OBJ loading, evaluation, tessellation).
+
+One name, three rooms: this package is the host room of ``kernels/subdivision.cl`` (a package, split by job,
+where other names have one module); its NumPy reference is ``reference/subdivision.py``, its tests
+``tests/test_subdivision.py``.
 """
 
 from .patches import PatchTable
