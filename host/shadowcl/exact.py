@@ -10,7 +10,9 @@ method is measured against.
 Local frame: all device geometry is relative to the centre of the union of the mesh's and the
 receivers' bounds (computed in float64 on the host, then rounded to float32), and points are made
 relative the same way (on the device in double when it has cl_khr_fp64, else on the host), so a scene
-far from the world origin keeps its float32 precision.
+far from the world origin keeps its float32 precision. With doubles, the working frame's move of the
+receivers (:class:`shadowcl.points.MovedPoints`) is done there too, in the first pass over them: the
+caller's float64 array goes to the device as it is (1.2 M receivers: one host pass of ~10 ms saved).
 
 Choices, measured on the bench's scenes (bench/receivers.py: bunny or ogre on a ground quad, 1 M
 receivers on the ground + 200 k on the model, random order, PoCL on 2 cores; ranges are run-to-run):

@@ -117,6 +117,9 @@ class MovedPoints(Points):
     def positions(self) -> np.ndarray:
         return self._move(self.world.positions)
 
+    def __len__(self) -> int:
+        return len(self.world)
+
     def _move(self, world: np.ndarray) -> np.ndarray:
         moved = np.subtract(world, self.centre)
         moved *= 1.0 / self.scale
