@@ -140,14 +140,6 @@ def _coarse_of_fine(grid) -> np.ndarray:
     return np.concatenate(parts)
 
 
-def _host_buffer(device, array: np.ndarray):
-    """A read-only device view of ``array`` without a copy where the device allows (CL_MEM_USE_HOST_PTR)."""
-    array = np.ascontiguousarray(array)
-    if array.nbytes == 0:
-        return device.to_device(array)
-    return cl.Buffer(device.context, cl.mem_flags.READ_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=array)
-
-
 class ExactMethod(Method):
     """Exact shadows: light-space lists built on the device, then the receivers' walks of their cells' lists.
 
@@ -410,12 +402,12 @@ class ExactMethod(Method):
             # float64 in; the kernel moves the points, subtracts the origin in double and rounds, as the
             # host would
             origin = [np.float64(c) for c in (*move, *self.origin)]
-            points_dev = _host_buffer(dev, points)
-            normals_dev = _host_buffer(dev, normals) if normals is not None else points_dev
+            points_dev = dev.input_view(points)
+            normals_dev = dev.input_view(normals) if normals is not None else points_dev
         else:
             origin = [np.float32(c) for c in (0, 0, 0, 1, 0, 0, 0)]
-            points_dev = _host_buffer(dev, np.subtract(points, self.origin).astype(np.float32))
-            normals_dev = points_dev if normals is None else _host_buffer(dev, normals.astype(np.float32))
+            points_dev = dev.input_view(np.subtract(points, self.origin).astype(np.float32))
+            normals_dev = points_dev if normals is None else dev.input_view(normals.astype(np.float32))
         binned = self.order == "cells"
         options = self._program
         brute_cell = self.grid.cells                   # one cell more: the points no view places
