@@ -265,7 +265,7 @@ def main(argv=None) -> int:
         for name, mesh, light, points, normals in cost_cases(args.levels or COST_SUBDIVISIONS):
             for with_normals in (False, True):
                 rows.append(measure_costs(name, mesh, light, points, normals if with_normals else None, 2, device))
-                print(costs_markdown(rows[-1:]).splitlines()[-1], flush=True)
+                print(costs_markdown(rows[-1:]).splitlines()[4], flush=True)
         args.out.mkdir(parents=True, exist_ok=True)
         doc = {"settings": {"repeats": 2, "load": [load, os.getloadavg()], "seconds": time.perf_counter() - started,
                             "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())}, "rows": rows}

@@ -56,7 +56,7 @@ from .points import BOUNDS_SLACK, Points, check_points
 DEFAULT_MAX_ERROR = 1e-3
 PASS_SHARE = 0.5            # sample sized so that a candidate at half the budget passes (lod.sample_size)
 OVERHEAD_SHARE = 0.15       # predicted calibration (exact on the sample, trials) within this share of exact's
-                            # time: twice the margin to the 1.3x bar, as predictions were off by up to 2x
+                            # time: half the 1.3x bar's margin, the other half for the predictions' errors
 SAMPLE_SHARE = 0.05         # a sample above this share of the receivers costs more than a candidate can save
 BOUNDS_RECEIVERS = 1_000_000  # receivers assumed by a prepare without receivers or expected_receivers
 SAMPLE_SEED = 20261202
@@ -64,15 +64,17 @@ MIN_SAMPLE = 4000           # at 1e-2 a candidate at half the budget (20 of 4 k 
                             # lod's 20 k floor cost 4-8 % of exact's time here
 CHOICE_MARGIN = 0.7         # a candidate is tried only when auto's whole time with it is predicted below
                             # this share of exact's: measured queries were up to 1.4x their priors
-SAMPLE_RATE = 2.0           # a method's time per receiver on a sample of a few thousand over its time per
-                            # receiver on 1.2 M (fixed launch costs; bench/auto.py --costs measures it)
+SAMPLE_RATE = 0.5           # a query's time per receiver on the calibration sample over that on all 1.2 M
+                            # (the full query also checks and moves 1.2 M points): exact's measured 0.20-1.33,
+                            # median 0.58, one 5.7 on 4 k (bench/auto.py --costs, auto-costs-3.md, load 12-15);
+                            # the sample is 0.1-2 % of exact's time at any of these rates
 
 # (method, settings) of every candidate, and their cost priors. COST_PRIORS[(light kind, normals)] holds
 # per triangle count of COST_TRIANGLES exact's prepare / exact's query, then per candidate (prepare /
 # exact's prepare, query / exact's query), medians of 2 interleaved rounds at 1.2 M receivers measured by
-# `bench/auto.py --costs` (perturbed spheres on a ground quad, not in ../shared; run 2026-12-02, load
-# 6-8 on 2 cores, so +-20 %). Between the counts the ratios are interpolated in log(triangles), beyond
-# them held at the ends.
+# `bench/auto.py --costs` (perturbed spheres on a ground quad, not in ../shared; run 2026-12-02 07:34-07:47
+# UTC, load rising from 2 to 10 on 2 cores: a rerun of the smallest sphere, auto-costs-3.md, differed by up
+# to 2x). Between the counts the ratios are interpolated in log(triangles), beyond them held at the ends.
 CANDIDATES = (
     ("shadow_volume", {}),
     ("shadow_map", {"resolution": 512}),
@@ -138,7 +140,8 @@ def predicted_costs(triangles: int, light_kind: str, normals: bool, receivers: i
     receivers) and per candidate label ``(trial, query)``: its trial (its prepare and its query of the
     sample) and its query of all receivers. A query's time is taken as proportional to its receivers (the
     priors' were 1.2 M), times :data:`SAMPLE_RATE` on a sample. (A shadow volume builds its cap lists in
-    its first query: its prior's query time includes them, so they are predicted at the sample's rate.)"""
+    its first query, so its trial is predicted short of them; but its answer is exact's, so a tried volume
+    is always chosen and the lists serve its full query, predicted with them.)"""
     priors = COST_PRIORS[(light_kind, bool(normals))]
     ratio = _interpolated(priors["exact"], triangles) * PRIORS_RECEIVERS / receivers   # exact's prepare / query
     prepare_share = ratio / (1 + ratio)
