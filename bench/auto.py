@@ -1,6 +1,7 @@
 """method="auto" against the exact method and against the sweep's oracle, at budgets 1e-2, 1e-3, 1e-4.
 
-    python bench/auto.py            # own shapes, bench models and hard scenes, 1.2 M receivers, with and without normals
+    python bench/auto.py            # own shapes (torus, csg_box also in sunlight), bench models and hard scenes,
+                                    # 1.2 M receivers, with and without normals
     python bench/auto.py --quick    # two own shapes, 100 k receivers: for development
     python bench/auto.py --costs    # the cost priors: each candidate's prepare and query time over exact's,
                                     # on perturbed spheres of 1.3 k-328 k triangles (not in ../shared)
@@ -38,6 +39,7 @@ BUDGETS = (1e-2, 1e-3, 1e-4)
 MODELS = ("bunny", "ogre", "teapot")
 HARD = ("light_inside", "thin_occluder")
 OWN = ("torus", "csg_box", "bumpy")
+SUN = ("torus", "csg_box")
 
 
 def own_shapes() -> dict:
@@ -69,6 +71,8 @@ def cases(quick: bool):
         scene = model_scene(name, shapes[name])
         points, normals = receivers(scene, int(0.85 * count), count - int(0.85 * count), seed=1)
         yield name, scene.mesh, scene.lights[0], points, normals
+        if name in SUN:         # in sunlight along the point light's line: where the priors let candidates be tried
+            yield f"{name}_sun", scene.mesh, sc.DirectionalLight(-np.asarray(scene.lights[0].position)), points, normals
     if quick:
         return
     for name in MODELS:
@@ -213,7 +217,8 @@ def measure(name, mesh, light, points, normals, repeats: int, device) -> list[di
             "errors_runs": errors, "broken": error > budget, "auto_s": runs["auto"].median, "exact_s": runs["exact"].median,
             "auto_vs_exact": ratio, "oracle": oracle, "oracle_vs_exact": within[oracle],
             "auto_vs_oracle": ratio / within[oracle], "sample": calibration["sample"],
-            "calibration_s": calibration["seconds"], "auto_runs": runs["auto"].runs, "exact_runs": runs["exact"].runs,
+            "calibration_s": calibration["seconds"],
+            "overhead_s": calibration["seconds"] - calibration["exact_prepare_s"],     # beyond exact's own prepare "auto_runs": runs["auto"].runs, "exact_runs": runs["exact"].runs,
             "tried": [r for r in calibration["tried"] if "skipped" not in r],
             "lod_auto": {"error": lod_error, "broken": lod_error > budget, "triangles": lod_auto.stats["occluder_triangles"],
                          "lod_s": lod_auto.stats["lod_s"]},
@@ -234,11 +239,13 @@ def _split(chosen: dict) -> dict:
 
 
 def markdown(rows: list[dict]) -> str:
-    lines = ["| scene | normals | budget | chosen | error on all | auto / exact | oracle (time / exact) | auto / oracle "
-             "| lod=auto triangles, error |", "|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| scene | normals | budget | chosen | error on all | auto / exact | calibration beyond exact's prepare, "
+             "exact's time | oracle (time / exact) | auto / oracle | lod=auto triangles, error |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         lines.append(f"| {r['scene']} | {'yes' if r['normals'] else 'no'} | {r['budget']:g} | {r['chosen']} | "
                      f"{r['error']:.2e}{' **broken**' if r['broken'] else ''} | {r['auto_vs_exact']:.2f} | "
+                     f"{1e3 * r['overhead_s']:.1f} ms, {1e3 * r['exact_s']:.0f} ms | "
                      f"{r['oracle']} ({r['oracle_vs_exact']:.2f}) | {r['auto_vs_oracle']:.2f} | "
                      f"{r['lod_auto']['triangles']:,} of {r['triangles']:,}, {r['lod_auto']['error']:.2e}"
                      f"{' **broken**' if r['lod_auto']['broken'] else ''} |")

@@ -300,7 +300,7 @@ class AutoMethod(Method):
                     truth = self._exact.classify(sample)
                     calibration.update(sample=len(sample), exact_sample_s=time.perf_counter() - clock)
                 spent += trial
-                instance = self._trial(record, occluders, light, box, eps, sample, truth, total)
+                instance = self._trial(record, settings, occluders, light, box, eps, sample, truth, total)
                 if instance is not None and record["passes"]:
                     self.chosen, self._chosen_params = instance, {"method": name, **instance.resolved_params()}
                     calibration.update(error=record["error"], upper_bound=record["upper_bound"])
@@ -335,14 +335,13 @@ class AutoMethod(Method):
             return f"its trial ({trial:.3f} of exact's time) would take the calibration past {allowance:.3f}"
         return None
 
-    def _trial(self, record, occluders, light, box, eps, sample, truth, total):
-        """Prepare candidate ``record["method"]`` with its settings and measure it on ``sample`` against
+    def _trial(self, record, settings, occluders, light, box, eps, sample, truth, total):
+        """Prepare candidate ``record["method"]`` with ``settings`` and measure it on ``sample`` against
         ``truth``: its wrong count, error, 99 % bound and whether it passes, and its times, go in ``record``;
         returns the prepared instance, or None when the method refused the query."""
         from .lod import upper_bound
 
         name = record["method"]
-        settings = {key: record[key] for key in record if key not in ("method", "predicted", "predicted_trial")}
         cls = method_class(name)
         instance = cls(self.device, **with_receiver_count(name, settings, total))
         start = time.perf_counter()
