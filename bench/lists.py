@@ -1,11 +1,11 @@
-"""The device prefix sum (``shadowcl.lists.prefix_sum``): its work-group scan against the serial-block scan
-it replaced, on the default device, in alternating rounds.
+"""The device prefix sum (``shadowcl.lists.prefix_sum``, serial blocks) against the work-group scan in
+local memory tried in its place (and dropped: slower on PoCL), on the default device, in alternating rounds.
 
-    python bench/lists.py [--quick] [--baseline REV] [--repeats 15] [--out bench/results]
+    python bench/lists.py [--quick] [--alternative REV] [--repeats 15] [--out bench/results]
 
-The baseline's kernels are ``kernels/lists.h`` at git revision ``REV`` (its two kernels built on their
-own), launched as that revision's ``prefix_sum`` did (:func:`serial_prefix_sum`, copied here). Three
-figures, each old and new alternated round by round (``timing.interleaved``), medians in ms:
+The work-group scan's kernels are ``kernels/lists.h`` at git revision ``REV`` (its two kernels built on
+their own), launched as that revision's ``prefix_sum`` did (:func:`group_prefix_sum`, copied here).
+Three figures, each the two alternated round by round (``timing.interleaved``), medians in ms:
 
 - the scan alone on ``n`` random counts (0-7);
 - the exact method's light-space build (``stats["scan_s"]``, the scan of one count per cell; and the
@@ -37,33 +37,36 @@ from timing import interleaved
 
 PROJECT = Path(__file__).resolve().parents[1]
 RESULTS = PROJECT / "bench" / "results"
-BASELINE = "fc1e83b"            # the last commit with the serial-block scan
+ALTERNATIVE = "d12a58a"         # the commit with the work-group scan
 
 
-def serial_program(device, rev: str) -> cl.Program:
-    """The baseline's ``lists.h`` kernels (``scan_block_sums``, ``scan_blocks``), built on their own."""
+def group_program(device, rev: str) -> cl.Program:
+    """The work-group scan's kernels (``scan_group_sums``, ``scan_groups``) of ``lists.h`` at ``rev``, built
+    on their own."""
     source = subprocess.run(["git", "-C", str(PROJECT), "show", f"{rev}:kernels/lists.h"], check=True,
                             capture_output=True, text=True).stdout
-    folder = Path(tempfile.mkdtemp(prefix="lists-baseline-"))
-    (folder / "lists_baseline.h").write_text(source)
-    program = cl.Program(device.context, '#include "lists_baseline.h"\n')
+    folder = Path(tempfile.mkdtemp(prefix="lists-alternative-"))
+    (folder / "lists_alternative.h").write_text(source)
+    program = cl.Program(device.context, '#include "lists_alternative.h"\n')
     return program.build(options=["-I", str(folder), "-I", str(PROJECT / "kernels")])
 
 
-def serial_prefix_sum(program: cl.Program):
-    """The baseline revision's ``prefix_sum``: two launches of 512 work-items scanning blocks serially."""
-    kernels = {name: cl.Kernel(program, name) for name in ("scan_block_sums", "scan_blocks")}
+def group_prefix_sum(program: cl.Program):
+    """That revision's ``prefix_sum``: two launches of work-groups of 128, at most 256 groups, each work-item
+    owning at least 8 counts; groups scan their items' sums in local memory."""
+    kernels = {name: cl.Kernel(program, name) for name in ("scan_group_sums", "scan_groups")}
+    group, most, least = 128, 256, 8
 
     def prefix_sum(device, kernel, counts, n, offsets):
         queue = device.queue
-        block = max(1024, -(-n // 512))
-        nblocks = -(-n // block)
-        sums = device.scratch("bench: baseline block sums", 8 * (nblocks + 1))
-        args = (counts, np.int32(n), np.int32(block))
-        kernels["scan_block_sums"](queue, (nblocks,), None, *args, sums)
-        kernels["scan_blocks"](queue, (nblocks,), None, *args, sums, offsets, np.int32(nblocks))
+        per_item = max(least, -(-n // (most * group)))
+        ngroups = max(1, -(-n // (group * per_item)))
+        sums = device.scratch("bench: work-group sums", 8 * (ngroups + 1))
+        args = (counts, np.int32(n), np.int32(per_item))
+        kernels["scan_group_sums"](queue, (ngroups * group,), (group,), *args, sums)
+        kernels["scan_groups"](queue, (ngroups * group,), (group,), *args, sums, offsets, np.int32(ngroups))
         total = np.empty(1, np.int64)
-        cl.enqueue_copy(queue, total, sums, src_offset=8 * nblocks)
+        cl.enqueue_copy(queue, total, sums, src_offset=8 * ngroups)
         return int(total[0])
     return prefix_sum
 
@@ -75,14 +78,14 @@ def load() -> str:
 def main(argv=None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="one size, the default scene only, 3 repeats")
-    parser.add_argument("--baseline", default=BASELINE)
+    parser.add_argument("--alternative", default=ALTERNATIVE)
     parser.add_argument("--repeats", type=int, default=None)
     parser.add_argument("--out", type=Path, default=RESULTS)
     args = parser.parse_args(argv)
     repeats = args.repeats or (3 if args.quick else 15)
     device = sc.get_device()
-    versions = {"serial blocks (old)": serial_prefix_sum(serial_program(device, args.baseline)),
-                "work-group scan (new)": lists.prefix_sum}
+    versions = {"serial blocks (kept)": lists.prefix_sum,
+                f"work-group scan ({args.alternative})": group_prefix_sum(group_program(device, args.alternative))}
     current = lists.prefix_sum
 
     def using(version, fn):
@@ -147,13 +150,13 @@ def main(argv=None) -> dict:
             print(row, flush=True)
 
     old, new = versions
-    lines = [f"# Prefix sum: work-group scan against serial blocks ({device.name})", "",
-             f"Medians of {repeats} alternating rounds after a warm-up, ms; baseline kernels from {args.baseline}. "
-             "Load: 1, 5, 15-minute averages when the row was measured (2 shared cores).", "",
-             f"| stage | case | {old} | {new} | new / old | load |", "|---|---|---|---|---|---|"]
+    lines = [f"# Prefix sum: serial blocks against a work-group scan ({device.name})", "",
+             f"Medians of {repeats} alternating rounds after a warm-up, ms; the work-group scan's kernels from "
+             f"{args.alternative}. Load: 1, 5, 15-minute averages when the row was measured (2 shared cores).", "",
+             f"| stage | case | {old} | {new} | work-group / serial | load |", "|---|---|---|---|---|---|"]
     for r in rows:
         lines.append(f"| {r['stage']} | {r['case']} | {r[old]:.3f} | {r[new]:.3f} | {r[new] / r[old]:.2f} | {r['load']} |")
-    doc = dict(device=device.name, repeats=repeats, baseline=args.baseline, rows=rows)
+    doc = dict(device=device.name, repeats=repeats, alternative=args.alternative, rows=rows)
     if not args.quick:
         args.out.mkdir(parents=True, exist_ok=True)
         (args.out / "lists.json").write_text(json.dumps(doc, indent=1) + "\n")

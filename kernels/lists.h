@@ -19,76 +19,45 @@
 
 #include "vecmath.h"
 
-/* Exclusive prefix sum in two launches of work-groups of SC_SCAN_GROUP work-items, each work-item
- * owning per_item consecutive counts: a work-group adds up its items' sums in local memory, then every
- * work-group scans its items' sums in local memory after the sums of the groups before it. */
-#define SC_SCAN_GROUP 128
-
-/* Inclusive sum of x over the work-group's items up to this one, by Hillis-Steele steps in `buf`
- * (SC_SCAN_GROUP longs); on return buf holds every item's result (buf[SC_SCAN_GROUP - 1]: the group's
- * sum) until the group's next barrier. Every work-item of the group must call it. */
-INLINE long sc_group_scan(long x, __local long *buf)
+/* Exclusive prefix sum in two launches, each work-item scanning a block serially (no local memory,
+ * no barriers: DESIGN.md item 13). sums gets one long per block, then the total. */
+__kernel void scan_block_sums(__global const int *counts, int n, int block, __global long *sums)
 {
-    const int l = get_local_id(0);
-    buf[l] = x;
-    barrier(CLK_LOCAL_MEM_FENCE);
-    for (int d = 1; d < SC_SCAN_GROUP; d <<= 1) {
-        const long before = l >= d ? buf[l - d] : 0;
-        barrier(CLK_LOCAL_MEM_FENCE);
-        x += before;
-        buf[l] = x;
-        barrier(CLK_LOCAL_MEM_FENCE);
-    }
-    return x;
-}
-
-/* The sum of work-item i's counts [i * per_item, (i + 1) * per_item) within [0, n). */
-INLINE long sc_item_sum(__global const int *counts, int n, int start, int per_item)
-{
-    const int end = min(n, start + per_item);
+    const int g = get_global_id(0);
+    const int start = g * block;
+    if (start >= n)
+        return;
+    const int end = min(n, start + block);
     long s = 0;
     for (int i = start; i < end; ++i)
         s += counts[i];
-    return s;
+    sums[g] = s;
 }
 
-/* sums[g] = the sum of work-group g's counts. */
-__kernel __attribute__((reqd_work_group_size(SC_SCAN_GROUP, 1, 1)))
-void scan_group_sums(__global const int *counts, int n, int per_item, __global long *sums)
+/* offsets[i] = sum of counts[0..i); offsets[n] = total, and sums[nblocks] = total (long). Work-item g
+ * adds up the block sums before its block itself (at most SCAN_BLOCKS of them: cheaper than a third
+ * kernel, whose first launch alone costs a compile on PoCL). Valid when the total fits an int (host
+ * checks). */
+__kernel void scan_blocks(__global const int *counts, int n, int block, __global long *sums,
+                          __global int *offsets, int nblocks)
 {
-    __local long buf[SC_SCAN_GROUP];
-    const long s = sc_group_scan(sc_item_sum(counts, n, get_global_id(0) * per_item, per_item), buf);
-    if (get_local_id(0) == SC_SCAN_GROUP - 1)
-        sums[get_group_id(0)] = s;
-}
-
-/* offsets[i] = sum of counts[0..i); offsets[n] = total, and sums[ngroups] = total (long). Work-group g
- * first adds up the sums of the groups before it (at most a few hundred: host SCAN_GROUPS), strided
- * over its items. Valid when the total fits an int (host checks). */
-__kernel __attribute__((reqd_work_group_size(SC_SCAN_GROUP, 1, 1)))
-void scan_groups(__global const int *counts, int n, int per_item, __global long *sums, __global int *offsets,
-                 int ngroups)
-{
-    __local long buf[SC_SCAN_GROUP];
-    const int l = get_local_id(0), g = get_group_id(0);
-    long part = 0;
-    for (int k = l; k < g; k += SC_SCAN_GROUP)
-        part += sums[k];
-    sc_group_scan(part, buf);
-    const long before = buf[SC_SCAN_GROUP - 1];
-    barrier(CLK_LOCAL_MEM_FENCE);                  /* everyone has read it before buf is reused */
-    const int start = get_global_id(0) * per_item;
-    const long own = sc_item_sum(counts, n, start, per_item);
-    const long through = before + sc_group_scan(own, buf);
-    int run = (int)(through - own);
-    const int end = min(n, start + per_item);
+    const int g = get_global_id(0);
+    const int start = g * block;
+    if (start >= n)
+        return;
+    long before = 0;
+    for (int k = 0; k < g; ++k)
+        before += sums[k];
+    const int end = min(n, start + block);
+    int run = (int)before;
     for (int i = start; i < end; ++i) {
         offsets[i] = run;
         run += counts[i];
     }
-    if (g == ngroups - 1 && l == SC_SCAN_GROUP - 1) {
-        offsets[n] = (int)through;
-        sums[ngroups] = through;
+    if (g == nblocks - 1) {
+        const long total = before + sums[g];
+        offsets[n] = (int)total;
+        sums[nblocks] = total;
     }
 }
 

@@ -14,28 +14,29 @@ from typing import Callable
 import numpy as np
 import pyopencl as cl
 
-SCAN_GROUP = 128            # work-items of a prefix-sum work-group (kernels/lists.h: SC_SCAN_GROUP)
-SCAN_GROUPS = 256           # work-groups of a prefix sum at most (each adds up the sums of those before it)
-SCAN_MIN_PER_ITEM = 8       # counts a prefix-sum work-item owns at least
+SCAN_BLOCKS = 512           # work-items of the prefix sum
 
 
 def prefix_sum(device, kernel: Callable[[str], cl.Kernel], counts: cl.Buffer, n: int, offsets: cl.Buffer) -> int:
     """offsets = exclusive prefix sum of the ``n`` int ``counts`` (n + 1 entries); returns the total.
 
     ``kernel(name)`` gives the kernel ``name`` of a program that includes ``lists.h``. Two launches of
-    work-groups scanning in local memory (kernels/lists.h); the total is summed in 64 bits, the offsets
-    are valid when it fits an int (the caller checks).
+    SCAN_BLOCKS work-items, each scanning a block serially (no local memory or barriers: DESIGN.md
+    item 13; a work-group scan in local memory was measured 1.1-9x slower on PoCL, bench/lists.py); the
+    total is summed in 64 bits, the offsets are valid when it fits an int (the caller checks).
     """
     queue = device.queue
-    per_item = max(SCAN_MIN_PER_ITEM, -(-n // (SCAN_GROUPS * SCAN_GROUP)))
-    ngroups = max(1, -(-n // (SCAN_GROUP * per_item)))
-    sums = device.scratch("lists: scan group sums", 8 * (ngroups + 1))
-    args = (counts, np.int32(n), np.int32(per_item))
-    size, group = (ngroups * SCAN_GROUP,), (SCAN_GROUP,)
-    kernel("scan_group_sums")(queue, size, group, *args, sums)
-    kernel("scan_groups")(queue, size, group, *args, sums, offsets, np.int32(ngroups))
+    if n == 0:                          # no block to scan
+        cl.enqueue_fill_buffer(queue, offsets, np.int32(0), 0, 4)
+        return 0
+    block = max(1024, -(-n // SCAN_BLOCKS))
+    nblocks = -(-n // block)
+    sums = device.scratch("lists: scan block sums", 8 * (nblocks + 1))
+    args = (counts, np.int32(n), np.int32(block))
+    kernel("scan_block_sums")(queue, (nblocks,), None, *args, sums)
+    kernel("scan_blocks")(queue, (nblocks,), None, *args, sums, offsets, np.int32(nblocks))
     total = np.empty(1, np.int64)
-    cl.enqueue_copy(queue, total, sums, src_offset=8 * ngroups)
+    cl.enqueue_copy(queue, total, sums, src_offset=8 * nblocks)
     return int(total[0])
 
 
