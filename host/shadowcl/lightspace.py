@@ -46,7 +46,7 @@ vertices on the light's plane: they are points at infinity, kept as directions.
 
 **Lists on the device.** ``lists="csr"`` (the default): count (atomic increments per cell; each
 primitive also records its cells as a 64-bit mask over its candidate cells), exclusive prefix sum
-(three launches of serial blocks, no local memory), fill (atomic decrements give each entry its slot;
+(two launches of serial blocks, no local memory: :func:`lists.prefix_sum`), fill (atomic decrements give each entry its slot;
 the mask spares re-projecting). The order within a cell is whatever the atomics give: the exact test
 does not depend on it (sorting by distance would only shorten walks of lit receivers, which the exact
 method's plane cull already makes cheap). ``lists="linked"``: one pass, nodes taken from an atomic
