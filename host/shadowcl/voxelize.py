@@ -357,6 +357,7 @@ SIDE_MATCH = 1e-2
 # Patches may be refined further than their neighbours (the table's ``domain``): a side can be a piece of
 # a neighbour's side. Sides are sampled at 2^SIDE_LOG + 1 points; pieces down to 2^-SIDE_LOG are found.
 SIDE_LOG = 4
+SIDE_CHUNK = 1 << 16       # side pairs compared at once (~27 MiB of sample gaps)
 
 
 def side_samples(vox: Voxelization) -> np.ndarray:
@@ -388,12 +389,14 @@ def matching_sides(vox: Voxelization) -> tuple[np.ndarray, np.ndarray, np.ndarra
     sides = np.flatnonzero(across >= 0)
     a = np.repeat(sides, 4)                                                # each side against the 4 across
     b = 4 * across[a] + np.tile(np.arange(4), len(sides))
-    ends = []
-    for j in (0, count - 1):                       # b's sample nearest to a's start, to a's end
-        gap = np.linalg.norm(points[b] - points[a, j][:, None], axis=2)
-        nearest = np.argmin(gap, axis=1) if len(b) else np.zeros(0, np.int64)
-        ends.append((nearest, gap[np.arange(len(b)), nearest] <= tol))
-    (j0, near0), (j1, near1) = ends
+    j0, j1 = np.zeros(len(a), np.int64), np.zeros(len(a), np.int64)
+    near0, near1 = np.zeros(len(a), bool), np.zeros(len(a), bool)
+    for lo in range(0, len(a), SIDE_CHUNK):        # b's sample nearest to a's start, to a's end
+        part = slice(lo, lo + SIDE_CHUNK)
+        for j, nearest, near in ((0, j0, near0), (count - 1, j1, near1)):
+            gap = np.linalg.norm(points[b[part]] - points[a[part], j][:, None], axis=2)
+            nearest[part] = np.argmin(gap, axis=1)
+            near[part] = gap[np.arange(len(gap)), nearest[part]] <= tol
     span = j1 - j0
     power = near0 & near1 & (span != 0) & ((np.abs(span) & (np.abs(span) - 1)) == 0) & (a != b)
     a, b, j0, span = a[power], b[power], j0[power], span[power]
