@@ -3,7 +3,8 @@
 Driven through the two kernels that use it (voxel.cl sort_lists: int items by a key table; angular.cl
 sort_rows: 8-float records by s_lo, then the running maximum of s_hi) on random segments whose lengths
 straddle the insertion/heapsort switch (SC_SORT_SHORT = 16) and on the hard cases: empty and single
-segments, ties, all-equal keys, sorted and reversed input.
+segments, ties, all-equal keys, sorted and reversed input. Also lists.check_filled, the fills' one
+overflow check. (The prefix sum is tested with the light-space lists that use it: test_lightspace.)
 """
 
 import numpy as np
