@@ -134,6 +134,12 @@ ROWS_PER_LINE = 2              # render's default rows per scan line (view_rows)
 TABLES = ("faces", "loops")
 RUN_PIECE = 64                 # classify_lines: receivers per work-item at most (a run never crosses a piece)
 SAMPLE = 20000                 # occluder vertices sampled for the frame choice
+ANGLE_PAD = 1e-5               # radians: a face is listed in the rows its theta range meets widened by this (times
+                               # r / rho, a corner's distance from the light over that from the pole axis): a receiver's
+                               # float32 theta rounds by ~1e-7 r / rho (atan2 a few ulp of pi): 10-100 x margin
+S_PAD = 1e-5                   # spans widened by this in s (point light: a receiver's float32 s = x / |p| is ~1e-7 off)
+LENGTH_PAD = 1e-5              # directional light: rows and spans (lengths) widened by this times the occluders'
+                               # extent from the frame's origin (float32 coordinates round by ~6e-8 of it)
 
 
 def ridge_loops(device, mesh: Mesh, light):
@@ -176,7 +182,9 @@ class Frame:
     """World -> angular frame: ``local = rotation @ (world - origin)``; the light at the origin for a
     point light; rows over ``[t0, t0 + rows * dt)``; ``full_circle`` rows wrap round. ``centre`` (world)
     is the occluders' box centre: the kernels hold receivers and face planes relative to it
-    (:attr:`anchor`), so that a distant point light costs the depth test no precision."""
+    (:attr:`anchor`), so that a distant point light costs the depth test no precision. ``pad_t`` and
+    ``pad_s`` widen a face's row range and spans against float32 rounding (:data:`ANGLE_PAD`,
+    :data:`S_PAD`; :data:`LENGTH_PAD` times the occluders' extent for a directional light)."""
 
     origin: np.ndarray
     rotation: np.ndarray
@@ -186,6 +194,8 @@ class Frame:
     rows: int
     full_circle: bool
     centre: np.ndarray
+    pad_t: float = ANGLE_PAD
+    pad_s: float = S_PAD
 
     @property
     def anchor(self) -> np.ndarray:
@@ -290,13 +300,16 @@ class LoopSet:
 class Table:
     """One light's lookup table on the device: ``offsets`` (rows + 1) int32 CSR and ``records``
     (entries x 8) float32 (``s_lo, s_hi, nx, ny, nz, d, face, running max of s_hi``; face as int32 bits),
-    rows sorted by ``s_lo``."""
+    rows sorted by ``s_lo``; ``relative`` (anchor-relative float32 vertices) and ``faces``: the triangles a
+    lookup tests a face record's hit against."""
 
     frame: Frame
     offsets: object
     records: object
     entries: int
     table_faces: np.ndarray
+    relative: object
+    faces: object
 
     @property
     def nbytes(self) -> int:
@@ -322,10 +335,12 @@ def build_table(device, local_vertices: np.ndarray, faces: np.ndarray, table_fac
     planes_g = dev.empty(16 * max(n, 1), "face planes")
     first_g = dev.empty(4 * max(n, 1), "face first rows")
     nrows_g = dev.empty(4 * max(n, 1), "face row counts")
+    pads_g = dev.empty(4 * max(n, 1), "face row pads")
     scalars = (np.int32(n), np.float32(frame.t0), np.float32(frame.dt), np.int32(rows))
     if n:
         dev.kernel("angular.cl", "face_rows", options)(queue, (n,), None, vertices_g, relative_g, faces_g, ids_g,
-                                                       *scalars, *anchor, planes_g, first_g, nrows_g)
+                                                       *scalars, *anchor, np.float32(frame.pad_t), planes_g, first_g,
+                                                       nrows_g, pads_g)
     counts = row_counts(dev.from_device(first_g, n, np.int32), dev.from_device(nrows_g, n, np.int32), rows)
     pairs = None if loops is None else loop_pairs(dev, vertices_g, loops, frame, stats)
     npairs = np.zeros(rows, dtype=np.int64) if pairs is None else pairs[2]
@@ -347,7 +362,8 @@ def build_table(device, local_vertices: np.ndarray, faces: np.ndarray, table_fac
         cursor_g = dev.to_device(npairs.astype(np.int32))
         if n:
             dev.kernel("angular.cl", "fill_rows", options)(queue, (n,), None, vertices_g, faces_g, ids_g, *scalars,
-                                                           planes_g, first_g, nrows_g, offsets_g, cursor_g, records_g)
+                                                           np.float32(frame.pad_s), planes_g, first_g, nrows_g, pads_g,
+                                                           offsets_g, cursor_g, records_g)
         check_rows_filled(dev, cursor_g, offsets, "fill_rows")
         t2 = time.perf_counter()
         dev.kernel("angular.cl", "sort_rows", options)(queue, (rows,), None, offsets_g, np.int32(rows), records_g)
@@ -355,7 +371,7 @@ def build_table(device, local_vertices: np.ndarray, faces: np.ndarray, table_fac
     t3 = time.perf_counter()
     stats.update(count_s=t1 - t0, fill_s=t2 - t1, sort_s=t3 - t2,
                  entries=entries, rows=rows, max_row=int(counts.max(initial=0)), table_bytes=4 * (rows + 1) + nbytes)
-    return Table(frame, offsets_g, records_g, entries, np.asarray(table_faces, dtype=np.int32))
+    return Table(frame, offsets_g, records_g, entries, np.asarray(table_faces, dtype=np.int32), relative_g, faces_g)
 
 
 def loop_pairs(device, vertices_g, loops, frame: Frame, stats: dict):
@@ -622,7 +638,13 @@ class AngularMethod(Method):
             pad = 0.5 * span / rows
             lo, hi = lo - pad, hi + pad
         centre = 0.5 * (mesh.vertices[used].min(axis=0) + mesh.vertices[used].max(axis=0)) if len(used) else origin
-        frame = Frame(origin, rotation, point, lo, (hi - lo) / rows, rows, full, np.asarray(centre, dtype=np.float64))
+        if point:
+            pads = (ANGLE_PAD, S_PAD)
+        else:
+            extent = float(np.abs(local[used]).max()) if len(used) else 1.0
+            pads = (LENGTH_PAD * extent, LENGTH_PAD * extent)
+        frame = Frame(origin, rotation, point, lo, (hi - lo) / rows, rows, full, np.asarray(centre, dtype=np.float64),
+                      *pads)
         loops = None
         if self.table_kind == "loops":
             # closed components by their loops (the row range above already covers them); open or
@@ -688,7 +710,7 @@ class AngularMethod(Method):
     def _common_args(self):
         f = self.frame
         return (np.float32(f.t0), np.float32(1.0 / f.dt), np.int32(f.rows), np.float32(self.eps),
-                self.table.offsets, self.table.records)
+                self.table.offsets, self.table.records, self.table.relative, self.table.faces)
 
     def classify(self, points, normals=None) -> np.ndarray:
         """Bool (N,) mask of world ``points`` (optional ``normals``, any length), True = in shadow."""
@@ -738,7 +760,7 @@ class AngularMethod(Method):
         if not _same_axis(prefer_x, self.prefer_x):
             _, rotation = angular_frame(self.light, self.mesh.vertices[self._sample], prefer_x)
             frame = Frame(frame.origin, rotation, frame.point, frame.t0, frame.dt, frame.rows, frame.full_circle,
-                          frame.centre)
+                          frame.centre, frame.pad_t, frame.pad_s)
         t = np.full(view.height * view.width, np.nan)
         t[seen.pixel_index] = row_coordinate(frame.to_local(seen.points), frame.point)
         step = np.abs(np.diff(t.reshape(view.height, view.width), axis=0))
