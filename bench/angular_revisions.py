@@ -6,9 +6,10 @@ REV's package (``host/shadowcl`` with its ``kernels/``) is extracted by ``git ar
 folder and imported under the name ``shadowcl_before``, so both versions run on the same receivers, the
 same device and the same load, their calls interleaved (timing.interleaved: a round calls each once).
 Scenes: bunny, ogre, teapot (receivers.py: ground + model points with normals, as bench/angular.py), each
-table at the default rows (eq. 4, expected_receivers given), through the public calls (``sc.prepare`` +
-``Shadows.mask``, timed as one call). Error against the working tree's exact method; time as the ratio
-after / before of the medians, and the table's records (the lookups' list length).
+table at the default rows (eq. 4, expected_receivers given), through the public calls: ``sc.prepare`` and
+``Shadows.mask`` (on a table prepared once), the four calls interleaved. Error against the working tree's
+exact method; time as the median over rounds of the round's ratio after / before (with its spread), per
+call, and the table's records (the lookups' list length).
 
 Writes OUT/angular_revisions.{json,md} (``-quick`` with ``--quick``).
 """
@@ -58,10 +59,9 @@ def import_revision(rev: str, folder: Path):
     return module
 
 
-def one_call(pkg, mesh, light, box, points, normals, eps, table):
-    """A user's prepare-then-mask with package ``pkg`` (``(mask, stats)``)."""
-    shadows = pkg.prepare(mesh, light, "angular", bounds=box, eps=eps, table=table, expected_receivers=len(points))
-    return shadows.mask(points, normals), shadows.stats
+def ratios(after, before) -> np.ndarray:
+    """Per-round time ratios after / before of two interleaved Timings."""
+    return np.array(after.runs) / np.array(before.runs)
 
 
 def main(argv=None) -> int:
@@ -82,31 +82,45 @@ def main(argv=None) -> int:
             truth = sc.shadow_mask(scene.mesh, light, points, normals, eps=eps)
             old_mesh, old_light = before.Mesh(scene.mesh.vertices, scene.mesh.faces), before.PointLight(light.position)
             for table in TABLES:
-                times = interleaved({
-                    "before": lambda: one_call(before, old_mesh, old_light, box, points, normals, eps, table),
-                    "after": lambda: one_call(sc, scene.mesh, light, box, points, normals, eps, table)}, args.repeats)
+                def prepare(pkg, m, lt):
+                    return lambda: pkg.prepare(m, lt, "angular", bounds=box, eps=eps, table=table,
+                                               expected_receivers=len(points))
+                shadows = {"before": prepare(before, old_mesh, old_light)(), "after": prepare(sc, scene.mesh, light)()}
+                times = interleaved({"before_prepare": prepare(before, old_mesh, old_light),
+                                     "after_prepare": prepare(sc, scene.mesh, light),
+                                     "before_mask": lambda: shadows["before"].mask(points, normals),
+                                     "after_mask": lambda: shadows["after"].mask(points, normals)}, args.repeats)
                 row = dict(scene=name, table=table, receivers=len(points))
-                for side, timing in times.items():
-                    mask, stats = timing.result
-                    err = mask_error(mask, truth)
-                    row.update({f"{side}_s": timing.median, f"{side}_error": err.fraction,
+                for side in ("before", "after"):
+                    err = mask_error(times[f"{side}_mask"].result, truth)
+                    stats = shadows[side].stats
+                    row.update({f"{side}_prepare_s": times[f"{side}_prepare"].median,
+                                f"{side}_mask_s": times[f"{side}_mask"].median, f"{side}_error": err.fraction,
                                 f"{side}_false_shadow": err.false_shadow, f"{side}_false_light": err.false_light,
                                 f"{side}_records": stats["entries"], f"{side}_rows": stats["rows"]})
-                row["time_ratio"] = row["after_s"] / row["before_s"]
+                for call in ("prepare", "mask"):
+                    r = ratios(times[f"after_{call}"], times[f"before_{call}"])
+                    row[f"{call}_ratio"] = float(np.median(r))
+                    row[f"{call}_ratio_range"] = [float(r.min()), float(r.max())]
                 rows.append(row)
                 print(row, flush=True)
     load = os.getloadavg()
     lines = [f"# Angular method: working tree against {args.before} (bench/angular_revisions.py)", "",
-             f"{ground + model} receivers per scene (ground + model, normals), default rows, sc.prepare + mask timed "
-             f"as one call, median of {args.repeats} interleaved rounds after a warm-up; load average "
-             f"{load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} (1 / 5 / 15 min) at the end, 2 shared cores.", "",
-             "| scene | table | rows | records before / after | error before / after | false shadows / lights after (receivers) "
-             "| s before / after | time ratio |", "|---" * 8 + "|"]
+             f"{ground + model} receivers per scene (ground + model, normals), default rows; sc.prepare and "
+             f"Shadows.mask, {args.repeats} interleaved rounds after a warm-up: medians, and the median (min-max) of "
+             f"the rounds' ratios after / before; load average {load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} "
+             "(1 / 5 / 15 min) at the end, 2 shared cores.", "",
+             "| scene | table | rows | records before / after | error before / after | false shadows / lights after "
+             "(receivers) | prepare s before / after | ratio | mask s before / after | ratio |", "|---" * 10 + "|"]
     for r in rows:
-        lines.append(f"| {r['scene']} | {r['table']} | {r['after_rows']} | {r['before_records']} / {r['after_records']} "
-                     f"| {100 * r['before_error']:.3f} / {100 * r['after_error']:.3f} % "
-                     f"| {r['after_false_shadow']} / {r['after_false_light']} "
-                     f"| {r['before_s']:.3f} / {r['after_s']:.3f} | {r['time_ratio']:.2f} |")
+        cells = [f"{r['scene']}", r["table"], f"{r['after_rows']}", f"{r['before_records']} / {r['after_records']}",
+                 f"{100 * r['before_error']:.3f} / {100 * r['after_error']:.3f} %",
+                 f"{r['after_false_shadow']} / {r['after_false_light']}"]
+        for call in ("prepare", "mask"):
+            low, high = r[f"{call}_ratio_range"]
+            cells += [f"{r[f'before_{call}_s']:.3f} / {r[f'after_{call}_s']:.3f}",
+                      f"{r[f'{call}_ratio']:.2f} ({low:.2f}-{high:.2f})"]
+        lines.append("| " + " | ".join(cells) + " |")
     doc = dict(before=args.before, receivers=ground + model, repeats=args.repeats, load=load, rows=rows)
     save(args.out, "angular_revisions-quick" if args.quick else "angular_revisions", doc, "\n".join(lines) + "\n")
     print("\n".join(lines))

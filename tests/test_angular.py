@@ -235,8 +235,10 @@ def _compare_lookups(method, points, normals):
     lp = f.to_local(points)
     ln = None if normals is None else normals @ f.rotation.T
     tab = _ref_table(method)
-    run = lambda grow=0.0, eps=method.eps: ref.classify(lp, ln, tab, f.t0, f.dt, f.rows, f.full_circle, f.point,  # noqa: E731
-                                                        eps, grow)
+
+    def run(grow=0.0, eps=method.eps):
+        return ref.classify(lp, ln, tab, f.t0, f.dt, f.rows, f.full_circle, f.point, eps, grow)
+
     want = run()
     tie = (run(grow=1e-5) != run(grow=-1e-5)) | (run(eps=method.eps * (1 + 1e-4)) != run(eps=method.eps * (1 - 1e-4)))
     differ = np.flatnonzero((got != want) & ~tie)

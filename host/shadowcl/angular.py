@@ -14,17 +14,23 @@ Pipeline (kernels/angular.cl):
    clears them by :data:`POLE_CLEARANCE`, so that a scan line stays in one row). A directional light
    uses parallel rows (planes Y = const, s = X).
 3. **Table** (sections 3-5, 7.1), built on the device: per table face, its plane and the rows whose
-   centre it spans (first row, count); the records per row and their exclusive prefix sum on the host (a
+   band ``[t0 + k dt, t0 + (k + 1) dt]`` its row-coordinate range meets, widened by :data:`ANGLE_PAD`
+   (first row, count); the records per row and their exclusive prefix sum on the host (a
    difference array over the faces' row intervals: per-row atomic counters on the device contended on a
    few hundred addresses, 0.45 s for 600 k faces); a fill pass writing one record per (face, row) at its
    row's offset plus an atomic cursor, then a sort of each row by ``s_lo`` (kernels/lists.h)
-   (the paper's pairwise sort). A record is the face's span ``[s_lo, s_hi]`` in the row -- the paper's
-   pair of crossings: a ridge-edge crossing where the face touches a loop, a visible-edge crossing
-   otherwise, so visible edges enter "in duplicate" (section 5) -- plus the face plane for depth. Pairs
-   therefore come from one face each: loops never need the local-peak pairing of section 4 to pair
-   correctly, however they coil (the reference builds the paper's loop-only table with that pairing and
-   the tests check both agree). Depth is exact (the ray meets the stored plane) instead of interpolated
-   between the pair's ends.
+   (the paper's pairwise sort). A record is the face's span ``[s_lo, s_hi]`` over the row's whole band
+   (the face clipped to the band's wedge -- slab for a directional light --, s extreme at a corner or where
+   an edge's great circle comes nearest the pole; widened by :data:`S_PAD`) -- the paper's pair of
+   crossings: a ridge-edge crossing where the face touches a loop, a visible-edge crossing otherwise, so
+   visible edges enter "in duplicate" (section 5) -- plus the face plane for depth. Pairs therefore come
+   from one face each: loops never need the local-peak pairing of section 4 to pair correctly, however
+   they coil (the reference builds the paper's loop-only table with that pairing and the tests check both
+   agree). A lookup tests the face itself: the plane (exact depth instead of r interpolated between the
+   pair's ends), then the triangle's three edge functions (watertight: a shared edge's function is
+   computed from its lower vertex index, the same bits for both faces). Since every direction the face
+   covers in the band lies in its span, no face is missed, and since the hit must lie in the triangle, no
+   plane counts past its face's edges: the table has no discretization error (see below).
    Table faces: the light-facing faces of each closed manifold component (a blocked ray always crosses
    one); every face of an open or non-manifold component (a ray can be stopped by a hidden face there).
 3b. **The paper's table** (``table="loops"``, :func:`loop_pairs`): for the closed components, each ridge
@@ -53,27 +59,21 @@ Pipeline (kernels/angular.cl):
    at s = +-1 in every row (without it the pillars round the pole in the light-inside scene lost their
    shadows: 225 wrong pixels against 12). Open and non-manifold components keep face records in the same
    rows (their hidden faces can stop rays, and their loops need not close).
-   Default ``table="faces"``, by bench/results/angular.md (same rows, same receivers, 2 shared cores):
-   on bunny, teapot and ogre (open meshes: their faces keep face records either way) the error is the
-   same and the loop table only adds the loop work (prepare + classify at the default rows 0.47 / 0.31 /
-   0.31 s against 0.39 / 0.21 / 0.29 s); on the 12 hard scenes the mean error is the same (0.00049 at
-   the default rows), the loop table better on contact, sphere_terminator, thin_occluder, shared_edges,
-   light_inside (the chord keeps a sphere's terminator band off the lit cap) and worse on coplanar and
-   far_offset (0.00110 / 0.00096 against 0.00028 / 0.00020). coplanar: receivers inside the other of two
-   interpenetrating boxes lie between the lit top and the chord below it, in front of the depth (never
-   visible: its render error is lower, 0.00015 against 0.00019); far_offset: not traced (false light
-   around the tube and the arch, concave solids, 21 of 25 wrong at 600 rows). The loop table is also
-   slower to build (1.33 s against 0.44 s at 100 000 cubes: the loops are chained on the host), though
-   faster to look up (0.060 s against 0.095 s for 500 000 receivers; a table 3.8 x smaller). Exact depth
-   from face planes also holds on every mesh without the chord's assumptions (no layered folds of one
-   lit region, a cap convex between creases). But a face record is the face's cut by the row's *centre*:
-   a receiver lying on a closed occluder's lit cap, up to half a row off it, meets the plane of a
-   neighbouring face extended past its edge, above a convex cap, and is falsely shadowed
-   (bench/results/angular_caps.md: 12-21 % of such receivers on a sphere, torus or cylinder under a
-   directional light, 0.25-7 % with the loop table, whose chord lies below the cap). Requiring the ray to
-   cross the listed face removes those (0 on the sphere) but turns the listings a row's centre misses
-   into false lights in the shadow (ground receivers: 9 -> 55-110 of 1,500): that needs spans over the
-   whole row, not done.
+   Default ``table="faces"``: exact but for float32 ties, where the loop table keeps its half-row band
+   (bench/results/angular_revisions.md: 0 of 500 000 receivers wrong on bunny, ogre and teapot at the
+   default rows, 0.094 / 0.105 / 0.037 % before; angular_caps.md: no false shadow or light on any
+   occluder or ground set). The row-centre spans it replaced (a face listed in the rows whose centre it
+   spans, cut there, its plane tested without its edges: the paper's discretization) falsely shadowed
+   15-22 % of the receivers lying on a sphere's, torus's or cylinder's lit cap under a directional light (a
+   receiver up to half a row off the centre met a neighbouring face's plane extended past its edge);
+   testing the triangle against those spans removed the caps' errors but missed the faces a row's centre
+   does not cut (46-101 false lights per 1,500 ground receivers). Band spans list each face in about one
+   more row than row-centre spans did (which left most small faces in no row at all): at the default rows
+   193 k -> 264 k records on the bunny, 133 k -> 225 k on the ogre, 65 k -> 72 k on the teapot; the
+   lookups test more candidates, and a plane hit also its edges: ``Shadows.mask`` took 1.41 / 1.71 / 0.99 x
+   its old time on 500 000 receivers, ``sc.prepare`` 1.16 / 1.34 / 1.83 x (interleaved medians, load ~11
+   on 2 shared cores). The loop table keeps the paper's error and is slower to build (its loops are
+   chained on the host).
 4. **Lookups**: per receiver, its row and ``s``; a binary search finds the records starting at or
    before ``s``, a backward scan tests them (first hit wins) and stops where the row's running maximum
    of ``s_hi`` falls below ``s`` (section 7 step 2, without walking the whole entry). ``classify_view``
@@ -92,15 +92,12 @@ Pipeline (kernels/angular.cl):
 A point light inside a closed solid (winding number of a closed component round it >= 1/2) raises
 ``ValueError``: every point outside that solid is in its shadow, and no face of it turns to the light.
 
-Discretization error: a receiver is judged with its occluders' spans at its row's centre, so it can
-differ from the exact method only when its ray passes within half a row (in theta; in Y for a
-directional light) of an edge of a table face whose span covers it in one of the two planes and not the
-other -- near shadow boundaries, and where the face covering it at the row's centre is a neighbour of its
-own: at concave creases and at terminators, where the ray grazes the surface (the 256-segment sphere's
-terminator is the worst hard case: 2.3 % of the pixels at 160 x 90, 0.17 % at 960 x 540). Refusing a face
-to receivers whose own theta lies outside the face's theta range was tried and doubled the error on the
-bunny, ogre and the terminator: the faces it refused were mostly standing in for a true blocker that the
-row's centre plane misses.
+Error: with ``table="faces"`` a receiver differs from the exact method only by float32 rounding (a ray
+within ~1e-6 of a face's size from its edge, or a hit within rounding of eps): rows and spans are widened
+past the receivers' float32 row coordinate and s (:data:`ANGLE_PAD`, :data:`S_PAD`, :data:`LENGTH_PAD`),
+so a receiver on a row boundary meets the same faces in either row. With ``table="loops"`` the pairs are
+cut at the row's centre: a receiver can differ when its ray passes within half a row (in theta; in Y for
+a directional light) of a loop edge, near shadow boundaries and terminators.
 
 >>> method = AngularMethod(get_device(), theta_resolution=600)
 >>> method.prepare(mesh, light, receiver_bounds, eps)
@@ -556,9 +553,10 @@ class AngularMethod(Method):
                                    "receiver; 600 when their number is unknown), and for render from the image "
                                    "(ROWS_PER_LINE rows per scan line)"),
         "expected_receivers": (None, "about how many receivers are coming, used to pick theta_resolution"),
-        "table": ("faces", "'faces': one span record per (light-facing face, row), exact depth from the face plane; "
-                           "'loops': the paper's table, the ridge-edge loops' crossings paired per loop (section 4), "
-                           "depth interpolated between a pair's ends (see the module docstring for the choice)"),
+        "table": ("faces", "'faces': one span record per (light-facing face, row band it meets), the hit tested on "
+                           "the triangle: exact but for float32 ties; 'loops': the paper's table, the ridge-edge "
+                           "loops' crossings paired per loop (section 4) at the row's centre, depth interpolated "
+                           "between a pair's ends (see the module docstring for the choice)"),
         "runs": (True, "classify_view: one lookup serves a run of pixels on a scan line (False: one per pixel)"),
         "prefer_x": (None, "preferred pole axis (world vector); None: away from the occluders, and for render "
                            "the camera's right axis when it is clear of them (rows along the scan lines)"),
