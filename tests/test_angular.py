@@ -331,8 +331,10 @@ HARD = sorted((SCENES / "hard").glob("*.toml"))
 
 @pytest.mark.parametrize("path", HARD, ids=[p.stem for p in HARD])
 def test_hard_cases(device, path):
-    """Every hard scene, both tables: the error against exact at the default resolution (the image's own
-    limit) stays under 3 % of the covered pixels (the discretization band), and 360 rows are no worse than 90."""
+    """Every hard scene, both tables. faces: at most 2 pixels differ from exact at any rows (float32 ties;
+    bench/results/angular.md measured 0 on every hard scene at 960 x 540). loops: the error at the default
+    resolution (the image's own limit) stays under 3 % of the covered pixels (the discretization band), and
+    360 rows are no worse than 90."""
     scene = sc.Scene.load(path)
     exact = render_report(scene, "exact", width=160, height=90).shadow
     for table in angular.TABLES:
@@ -340,7 +342,10 @@ def test_hard_cases(device, path):
         for rows in (None, 90, 360):
             result = render_report(scene, "angular", width=160, height=90, theta_resolution=rows, table=table)
             wrong[rows] = np.count_nonzero(result.shadow != exact)
-        # 3 %: the 256-segment sphere's terminator (faces: 2.3 %, a grazing self-shadow band half a row wide)
+        if table == "faces":
+            assert max(wrong.values()) <= 2, wrong
+            continue
+        # 3 %: the 256-segment sphere's terminator (a grazing self-shadow band half a row wide)
         assert wrong[None] <= 0.03 * exact.size, (table, wrong)
         assert wrong[360] <= wrong[90] + 0.002 * exact.size, (table, wrong)
 
