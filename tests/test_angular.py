@@ -395,7 +395,7 @@ def _over_ground(shape):
 def test_lit_caps_and_ground(device, shape):
     """Receivers ON a closed occluder's lit side (face normals, directional light) are not shadowed by a
     neighbouring face's plane (the faces table used to cut faces at the row's centre and extend their
-    planes past their edges: 12-21 % false shadows on such caps, bench/results/angular_caps.md), and the
+    planes past their edges: 15-22 % false shadows on such caps, bench/results/angular_caps.md), and the
     ground under it loses no shadow (spans cover the whole row band: no face is missed). Measured on 3000
     + 3000 receivers per shape and light (three lights, these two shapes): 0 false shadows and 0 false
     lights on both sets; the bound of 2 per 1500 leaves room for float32 ties (a receiver within ~1e-6 of
