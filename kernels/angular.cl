@@ -14,6 +14,7 @@
  * positive side), used for the depth test: exact depth instead of interpolating r between the pair's ends;
  * then the face index (int bits) and the running maximum of s_hi along the row (set by sort_rows). A
  * lookup tests the face itself (its plane, then its edges: record_blocks), never the plane past its edges.
+ * A wide span is cut into up to MAX_PIECES records (face_rows), so the running maximum stops lookups early.
  * An empty span (the face misses the band) is s_lo = 2 > s_hi = -2 and never matches.
  * The paper's table (host table="loops") puts loop pairs in the same record layout: s_lo, s_hi of a pair
  * of ridge-edge crossings (edge_rows, fill_edges, pair_rows below), the plane of the chord between them
@@ -115,16 +116,22 @@ INLINE int wrap_row(int k, int rows)
 #endif
 }
 
+#define MAX_PIECES 64
+
 /* face_rows: one work-item per table face. Writes the face plane (oriented with the light on its
  * positive side; all zeros for an edge-on or zero-area face), the first row (unwrapped), the number of
  * rows whose band [t0 + k dt, t0 + (k + 1) dt] meets the face's row-coordinate range widened by its pad
- * (the host sums them per row), and that pad. pad_t: the float32 error allowance of a receiver's row
- * coordinate (radians for a point light, where it grows as r / rho near the pole axis: the pad is
- * pad_t max(1, r / rho) over the corners; a length for a directional light). */
+ * (the host sums them per row, times the pieces), that pad, and the pieces its span is cut into in every
+ * row: its corners' s extent over piece_width, 1 to MAX_PIECES (a lookup's backward scan stops where the
+ * row's running maximum of s_hi falls below s, so a span across the whole row, a ground under the
+ * occluders, made every lookup walk the row back to its start). pad_t: the float32 error allowance of a
+ * receiver's row coordinate (radians for a point light, where it grows as r / rho near the pole axis: the
+ * pad is pad_t max(1, r / rho) over the corners; a length for a directional light). */
 __kernel void face_rows(const __global float *vertices, const __global float *relative, const __global int *faces,
                         const __global int *face_ids, const int nfaces, const float t0, const float dt, const int rows,
                         const float anc_x, const float anc_y, const float anc_z, const float pad_t,
-                        __global float *planes, __global int *first_row, __global int *row_count, __global float *pads)
+                        const float piece_width, __global float *planes, __global int *first_row,
+                        __global int *row_count, __global float *pads, __global int *pieces)
 {
     const int i = get_global_id(0);
     if (i >= nfaces) return;
@@ -193,6 +200,15 @@ __kernel void face_rows(const __global float *vertices, const __global float *re
     first_row[i] = k0;
     row_count[i] = n;
     pads[i] = pad;
+#if LIGHT_POINT
+    const float sa = x0 / SC_MAX(SC_SQRT(x0 * x0 + y0 * y0 + z0 * z0), 1e-30f);
+    const float sb = x1 / SC_MAX(SC_SQRT(x1 * x1 + y1 * y1 + z1 * z1), 1e-30f);
+    const float sc = x2 / SC_MAX(SC_SQRT(x2 * x2 + y2 * y2 + z2 * z2), 1e-30f);
+    const float extent = all_rows ? 2.0f : SC_MAX(sa, SC_MAX(sb, sc)) - SC_MIN(sa, SC_MIN(sb, sc));
+#else
+    const float extent = SC_MAX(x0, SC_MAX(x1, x2)) - SC_MIN(x0, SC_MIN(x1, x2));
+#endif
+    pieces[i] = clamp((int)ceil(extent / piece_width), 1, MAX_PIECES);
 }
 
 /* Clip the convex polygon (px, py, pz)[0..n) to g(p) = gx x + gy y + gz z + g0 >= 0 (in place; at most 5
@@ -272,14 +288,16 @@ INLINE void band_span(float x0, float y0, float z0, float x1, float y1, float z1
     *hi = s_hi + pad_s;
 }
 
-/* fill_rows: one work-item per table face; writes its record in every row it spans, at the row's
- * offset plus a slot taken from the row's cursor (offsets from the exclusive prefix sum of counts). A slot
- * past the row's end is not written; the cursor still counts it and the host checks (check_rows_filled). */
+/* fill_rows: one work-item per table face; writes its records in every row it spans -- its span cut into
+ * pieces[i] equal parts (ends shared bit for bit: an s on a cut lies in both), or as many empty records
+ * when it misses the band -- each at the row's offset plus a slot taken from the row's cursor (offsets
+ * from the exclusive prefix sum of counts). A slot past the row's end is not written; the cursor still
+ * counts it and the host checks (check_rows_filled). */
 __kernel void fill_rows(const __global float *vertices, const __global int *faces, const __global int *face_ids,
                         const int nfaces, const float t0, const float dt, const int rows, const float pad_s,
                         const __global float *planes, const __global int *first_row, const __global int *row_count,
-                        const __global float *pads, const __global int *offsets, volatile __global int *cursor,
-                        __global float *records)
+                        const __global float *pads, const __global int *pieces, const __global int *offsets,
+                        volatile __global int *cursor, __global float *records)
 {
     const int i = get_global_id(0);
     if (i >= nfaces) return;
@@ -290,24 +308,28 @@ __kernel void fill_rows(const __global float *vertices, const __global int *face
     LOAD3(vertices, faces[3 * f], x0, y0, z0);
     LOAD3(vertices, faces[3 * f + 1], x1, y1, z1);
     LOAD3(vertices, faces[3 * f + 2], x2, y2, z2);
-    const int k0 = first_row[i];
+    const int k0 = first_row[i], parts = pieces[i];
     const float pad = pads[i];
     for (int j = 0; j < n; ++j) {
         const int k = wrap_row(k0 + j, rows);
         float lo, hi;
         band_span(x0, y0, z0, x1, y1, z1, x2, y2, z2, t0 + (float)k * dt - pad, t0 + (float)(k + 1) * dt + pad, pad_s,
                   &lo, &hi);
-        const int slot = offsets[k] + atomic_inc(&cursor[k]);
-        if (slot >= offsets[k + 1]) continue;
-        __global float *r = records + (size_t)REC * slot;
-        r[0] = lo;
-        r[1] = hi;
-        r[2] = planes[4 * i];
-        r[3] = planes[4 * i + 1];
-        r[4] = planes[4 * i + 2];
-        r[5] = planes[4 * i + 3];
-        r[6] = as_float(f);
-        r[7] = 0.0f;                       /* running max of s_hi, set by sort_rows */
+        const float width = (hi - lo) / (float)parts;
+        for (int part = 0; part < parts; ++part) {
+            const int slot = offsets[k] + atomic_inc(&cursor[k]);
+            if (slot >= offsets[k + 1]) continue;
+            __global float *r = records + (size_t)REC * slot;
+            const bool empty = lo > hi;
+            r[0] = empty ? EMPTY_LO : (part == 0 ? lo : lo + (float)part * width);
+            r[1] = empty ? EMPTY_HI : (part == parts - 1 ? hi : lo + (float)(part + 1) * width);
+            r[2] = planes[4 * i];
+            r[3] = planes[4 * i + 1];
+            r[4] = planes[4 * i + 2];
+            r[5] = planes[4 * i + 3];
+            r[6] = as_float(f);
+            r[7] = 0.0f;                   /* running max of s_hi, set by sort_rows */
+        }
     }
 }
 
