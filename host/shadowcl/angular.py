@@ -71,11 +71,12 @@ Pipeline (kernels/angular.cl):
    receiver up to half a row off the centre met a neighbouring face's plane extended past its edge);
    testing the triangle against those spans removed the caps' errors but missed the faces a row's centre
    does not cut (46-101 false lights per 1,500 ground receivers). Band spans list each face in about one
-   more row than row-centre spans did (which left most small faces in no row at all): at the default rows
-   193 k -> 264 k records on the bunny, 133 k -> 225 k on the ogre, 65 k -> 72 k on the teapot; the
-   lookups test more candidates, and a plane hit also its edges: ``Shadows.mask`` took 1.41 / 1.71 / 0.99 x
-   its old time on 500 000 receivers, ``sc.prepare`` 1.16 / 1.34 / 1.83 x (interleaved medians, load ~11
-   on 2 shared cores). The loop table keeps the paper's error and is slower to build (its loops are
+   more row than row-centre spans did (which left most small faces in no row at all), and wide ones in
+   pieces: at the default rows 193 k -> 311 k records on the bunny, 133 k -> 263 k on the ogre, 65 k ->
+   108 k on the teapot; the lookups test more candidates, and a plane hit also its edges (9-32 % of the
+   lookup time, against a plane-only build): ``Shadows.mask`` took 1.23 / 1.37 / 1.13 x its old time on
+   500 000 receivers, ``sc.prepare`` 1.35 / 1.35 / 1.39 x (medians of the interleaved rounds' ratios,
+   load ~8.5 on 2 shared cores). The loop table keeps the paper's error and is slower to build (its loops are
    chained on the host).
 4. **Lookups**: per receiver, its row and ``s``; a binary search finds the records starting at or
    before ``s``, a backward scan tests them (first hit wins) and stops where the row's running maximum
