@@ -236,7 +236,8 @@ def methods_table() -> str:
 
 def auto_table() -> str:
     """method="auto" and lod="auto" per budget, from ``auto.json`` (bench/auto.py)."""
-    rows = load("auto.json")["rows"]
+    doc = load("auto.json")
+    rows = doc["rows"]
     lines = ["| budget | cases | budget broken: auto / lod=\"auto\" | auto / exact: median, worst | "
              "auto / sweep's oracle: median, worst | chosen (most frequent per case) |", "|---|---|---|---|---|---|"]
     for budget in sorted({r["budget"] for r in rows}, reverse=True):
@@ -249,8 +250,11 @@ def auto_table() -> str:
                      f"{np.median(oracle):.2f}, {max(oracle):.2f} | "
                      f"{', '.join(f'{c} {n}' for c, n in chosen.items())} |")
     scenes = sorted({r["scene"] for r in rows}, key=[r["scene"] for r in rows].index)
+    loads = doc["settings"].get("load")
+    load_note = f"; load average {loads[0][0]:.1f} at the start, {loads[1][0]:.1f} at the end on 2 cores" if loads else ""
     lines.append(f"\nScenes: {', '.join(scenes)}, {count(rows[0]['receivers'])} receivers, with and without normals "
-                 f"(`auto.json`; per case: `bench/results/auto.md`).")
+                 f"(`auto.json`, {doc['settings']['repeats']} interleaved rounds{load_note}; per case: "
+                 f"`bench/results/auto.md`).")
     return "\n".join(lines)
 
 
