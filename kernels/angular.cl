@@ -292,7 +292,7 @@ INLINE void band_span(float x0, float y0, float z0, float x1, float y1, float z1
  * pieces[i] equal parts (ends shared bit for bit: an s on a cut lies in both), or as many empty records
  * when it misses the band -- each at the row's offset plus a slot taken from the row's cursor (offsets
  * from the exclusive prefix sum of counts). A slot past the row's end is not written; the cursor still
- * counts it and the host checks (check_rows_filled). */
+ * counts it and the host checks (lists.check_filled). */
 __kernel void fill_rows(const __global float *vertices, const __global int *faces, const __global int *face_ids,
                         const int nfaces, const float t0, const float dt, const int rows, const float pad_s,
                         const __global float *planes, const __global int *first_row, const __global int *row_count,

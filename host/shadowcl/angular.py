@@ -121,6 +121,7 @@ from .lights import PointLight
 from .methods import Method, check_prepare
 from .points import check_points
 from .lightspace import box_corners, orthonormal_basis
+from .lists import check_filled
 from .silhouette import edge_adjacency, silhouette_edges, silhouette_loops
 from .topology import components, concave_edges
 
@@ -374,7 +375,7 @@ def build_table(device, local_vertices: np.ndarray, faces: np.ndarray, table_fac
             dev.kernel("angular.cl", "fill_rows", options)(queue, (n,), None, vertices_g, faces_g, ids_g, *scalars,
                                                            np.float32(frame.pad_s), planes_g, first_g, nrows_g, pads_g,
                                                            pieces_g, offsets_g, cursor_g, records_g)
-        check_rows_filled(dev, cursor_g, offsets, "fill_rows")
+        check_filled(dev, cursor_g, "angular fill_rows", offsets)
         t2 = time.perf_counter()
         dev.kernel("angular.cl", "sort_rows", options)(queue, (rows,), None, offsets_g, np.int32(rows), records_g)
     queue.finish()
@@ -429,7 +430,7 @@ def loop_pairs(device, vertices_g, loops, frame: Frame, stats: dict):
             dev.kernel("angular.cl", "fill_edges", options)(
                 queue, (ne,), None, vertices_g, tails_g, heads_g, dev.to_device(group), np.int32(ne), np.int32(nridge),
                 *scalars[1:], first_g, count_g, offsets_g, cursor_g, cross_g)
-        check_rows_filled(dev, cursor_g, offsets, "fill_edges")
+        check_filled(dev, cursor_g, "angular fill_edges", offsets)
     queue.finish()
     t_pair = time.perf_counter()
     while True:
@@ -500,19 +501,6 @@ def check_capacity(device, entries: int, rows: int, what: str) -> None:
     if entries >= 2**31 or nbytes > device.max_alloc_bytes:
         raise ValueError(f"theta_resolution: {rows} rows give {entries} {what} ({nbytes >> 20} MiB), more than "
                          f"the device holds in one buffer ({device.max_alloc_bytes >> 20} MiB); use fewer rows")
-
-
-def check_rows_filled(device, cursor_g, offsets: np.ndarray, kernel: str) -> None:
-    """Raise ``RuntimeError`` when a fill kernel's row cursors (``cursor_g``, (rows,) slots taken) went past
-    their rows' slots (``offsets``, (rows + 1,)): the kernel dropped those writes, so the table would be
-    silently short. The counts come from the same per-item row ranges, so this is a bug, not a size to grow."""
-    rows = len(offsets) - 1
-    taken = device.from_device(cursor_g, rows, np.int32).astype(np.int64)
-    over = np.flatnonzero(taken > np.diff(offsets))
-    if len(over):
-        k = int(over[0])
-        raise RuntimeError(f"angular {kernel}: {len(over)} rows got more records than counted, first row {k} "
-                           f"({taken[k]} for {int(offsets[k + 1] - offsets[k])} slots); writes past them were dropped")
 
 
 def row_counts(first: np.ndarray, count: np.ndarray, rows: int, per_row=None) -> np.ndarray:
