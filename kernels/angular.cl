@@ -14,7 +14,8 @@
  * positive side), used for the depth test: exact depth instead of interpolating r between the pair's ends;
  * then the face index (int bits) and the running maximum of s_hi along the row (set by sort_rows). A
  * lookup tests the face itself (its plane, then its edges: record_blocks), never the plane past its edges.
- * A wide span is cut into up to MAX_PIECES records (face_rows), so the running maximum stops lookups early.
+ * A wide span is cut into records of at most piece_width (face_rows: 16 at most from the host's width),
+ * so the running maximum stops lookups early.
  * An empty span (the face misses the band) is s_lo = 2 > s_hi = -2 and never matches.
  * The paper's table (host table="loops") puts loop pairs in the same record layout: s_lo, s_hi of a pair
  * of ridge-edge crossings (edge_rows, fill_edges, pair_rows below), the plane of the chord between them
@@ -116,7 +117,7 @@ INLINE int wrap_row(int k, int rows)
 #endif
 }
 
-#define MAX_PIECES 64
+#define MAX_PIECES 64         /* bounds the count whatever the extent's rounding (the host's width gives <= 17) */
 
 /* face_rows: one work-item per table face. Writes the face plane (oriented with the light on its
  * positive side; all zeros for an edge-on or zero-area face), the first row (unwrapped), the number of

@@ -681,3 +681,22 @@ def test_fills_never_write_past_their_rows(device, monkeypatch, table, kernel):
     with pytest.raises(RuntimeError, match=f"angular {kernel} met .* entries more than its count made room for"):
         prepared(device, torus_over_plane(), sc.PointLight((0.3, 3.0, 0.2)), ground_points(np.random.default_rng(2), 10),
                  theta_resolution=64, table=table)
+
+
+def test_distant_point_light_keeps_the_table_small_and_right(device):
+    """The float32 pads scale with the occluders' angular size: a point light 1e4 sizes away lists about
+    as many entries as one 10 sizes away (absolute pads put every face in most rows: 14x at 1e4 on
+    this sphere), and the faces table still answers as exact does."""
+    from shadowcl.testing import icosphere
+    mesh = icosphere(4)
+    rng = np.random.default_rng(5)
+    points = np.c_[rng.uniform(-3, 3, 20_000), np.full(20_000, -2.0), rng.uniform(-3, 3, 20_000)]
+    entries = {}
+    for distance in (10.0, 1e3, 1e4):
+        light = sc.PointLight((0.01 * distance, distance, 0.007 * distance))
+        shadows = sc.prepare(mesh, light, "angular", bounds=[points.min(0), points.max(0)], device=device)
+        got = shadows.mask(points)
+        truth = sc.shadow_mask(mesh, light, points, method="exact", device=device)
+        assert truth.sum() > 1000 and np.count_nonzero(got != truth) <= 2, distance
+        entries[distance] = shadows.stats["entries"]
+    assert entries[1e4] <= 1.5 * entries[10.0] and entries[1e3] <= 1.5 * entries[10.0], entries

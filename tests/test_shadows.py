@@ -290,7 +290,7 @@ def test_moved_points_are_the_host_move_bit_for_bit_and_read_lazily(rng):
     centre, scale = world.positions[17] + 0.123, 2.0 ** 11
     moved = MovedPoints(world, centre, scale, (world.bounds - centre) / scale)
     assert len(moved) == 5_000 and "positions" not in vars(moved)
-    eager = Points((world.positions - centre) * (1.0 / scale), world.normals, moved.bounds)
+    eager = Points((world.positions - centre) / scale, world.normals, moved.bounds)   # as Frame.points
     assert np.array_equal(moved.positions, eager.positions)
     index = rng.choice(5_000, 300, replace=False)
     assert np.array_equal(moved.subset(index).positions, eager.subset(index).positions)
@@ -320,6 +320,8 @@ def test_exact_moves_receivers_on_the_device_as_the_host_does(device, rng, with_
     method = ExactMethod(device)
     method.prepare(framed_mesh, sc.PointLight((np.array([3e5, -2e5 + 4, 1e5 + 0.5]) - centre) / scale),
                    moved.bounds, 1e-4)
-    fused = method.classify(MovedPoints(world, centre, scale, moved.bounds))
+    lazy = MovedPoints(world, centre, scale, moved.bounds)
+    fused = method.classify(lazy)
+    assert "positions" not in vars(lazy)          # the device moved them: the host never did
     host = method.classify(eager)
     assert 0.05 < fused.mean() < 0.95 and np.array_equal(fused, host)

@@ -136,10 +136,12 @@ ROWS_PER_LINE = 2              # render's default rows per scan line (view_rows)
 TABLES = ("faces", "loops")
 RUN_PIECE = 64                 # classify_lines: receivers per work-item at most (a run never crosses a piece)
 SAMPLE = 20000                 # occluder vertices sampled for the frame choice
-ANGLE_PAD = 1e-5               # radians: a face is listed in the rows its theta range meets widened by this (times
-                               # r / rho, a corner's distance from the light over that from the pole axis): a receiver's
-                               # float32 theta rounds by ~1e-7 r / rho (atan2 a few ulp of pi): 10-100 x margin
-S_PAD = 1e-5                   # spans widened by this in s (point light: a receiver's float32 s = x / |p| is ~1e-7 off)
+ANGLE_PAD = 1e-5               # a face is listed in the rows its theta range meets widened by this times the
+                               # occluders' theta size (at most 1 radian) and r / rho (a corner's distance from the light
+                               # over that from the pole axis): a receiver's float32 theta rounds by ~1e-7 of its size
+                               # times r / rho (atan2 a few ulp): 10-100 x margin
+S_PAD = 1e-5                   # spans widened by this times the occluders' s size (point light: a receiver's float32
+                               # s = x / |p| is ~1e-7 of it off)
 LENGTH_PAD = 1e-5              # directional light: rows and spans (lengths) widened by this times the occluders'
                                # extent from the frame's origin (float32 coordinates round by ~6e-8 of it)
 PIECES = 16                    # a face's span is cut in pieces of at most 1 / PIECES of the s range (point: 2;
@@ -189,8 +191,9 @@ class Frame:
     point light; rows over ``[t0, t0 + rows * dt)``; ``full_circle`` rows wrap round. ``centre`` (world)
     is the occluders' box centre: the kernels hold receivers and face planes relative to it
     (:attr:`anchor`), so that a distant point light costs the depth test no precision. ``pad_t`` and
-    ``pad_s`` widen a face's row range and spans against float32 rounding (:data:`ANGLE_PAD`,
-    :data:`S_PAD`; :data:`LENGTH_PAD` times the occluders' extent for a directional light);
+    ``pad_s`` widen a face's row range and spans against float32 rounding (:data:`ANGLE_PAD` and
+    :data:`S_PAD` times the occluders' angular size for a point light; :data:`LENGTH_PAD` times their
+    extent for a directional light);
     ``piece_width`` is the widest span piece (:data:`PIECES`)."""
 
     origin: np.ndarray
@@ -201,9 +204,9 @@ class Frame:
     rows: int
     full_circle: bool
     centre: np.ndarray
-    pad_t: float = ANGLE_PAD
-    pad_s: float = S_PAD
-    piece_width: float = 2.0 / PIECES
+    pad_t: float
+    pad_s: float
+    piece_width: float
 
     @property
     def anchor(self) -> np.ndarray:
@@ -217,7 +220,7 @@ class Frame:
 
     @property
     def row_centres(self) -> np.ndarray:
-        """(rows,) row coordinate of each row's centre: the plane its spans are cut with."""
+        """(rows,) row coordinate of each row's centre: the plane the loops table's spans are cut with."""
         return self.t0 + (np.arange(self.rows) + 0.5) * self.dt
 
 
@@ -321,7 +324,7 @@ class Table:
 
     @property
     def nbytes(self) -> int:
-        return 4 * (self.frame.rows + 1) + 4 * REC_FLOATS * self.entries
+        return 4 * (self.frame.rows + 1) + 4 * REC_FLOATS * self.entries + self.relative.size + self.faces.size
 
 
 def build_table(device, local_vertices: np.ndarray, faces: np.ndarray, table_faces: np.ndarray, frame: Frame,
@@ -635,12 +638,19 @@ class AngularMethod(Method):
             far_pts = box_corners(box)
             far = float(np.linalg.norm(far_pts - light.position, axis=1).max()) if point else 0.0
             rows = rows_from_receivers(span, far, box, self.expected_receivers, point)
-        if not full:                                   # pad half a row each side: extreme corners get a centre
+        if not full:                                   # pad half a row each side (the loops table cuts at row centres)
             pad = 0.5 * span / rows
             lo, hi = lo - pad, hi + pad
         centre = 0.5 * (mesh.vertices[used].min(axis=0) + mesh.vertices[used].max(axis=0)) if len(used) else origin
         if point:
-            pads = (ANGLE_PAD, S_PAD, 2.0 / PIECES)
+            # Float32 rounding of a direction's theta and s is relative to their own size (-Z points at
+            # the occluders' centre and coordinates are held relative to it), so the pads scale with
+            # the occluders' angular size: a light 1e5 sizes away has rows and spans ~1e-5 wide, and
+            # absolute pads listed every face in most rows (82 k triangles: 173 k -> 18.5 M entries).
+            directions = local[used] / np.linalg.norm(local[used], axis=1, keepdims=True) if len(used) else np.ones((1, 3))
+            angle_scale = min(1.0, max(abs(lo), abs(hi), hi - lo))
+            s_scale = min(1.0, float(np.abs(directions[:, 0]).max()) + float(np.ptp(directions[:, 0])))
+            pads = (ANGLE_PAD * max(angle_scale, 1e-12), S_PAD * max(s_scale, 1e-12), 2.0 / PIECES)
         else:
             extent = float(np.abs(local[used]).max()) if len(used) else 0.0
             extent = extent if extent > 0 else 1.0                 # (all corners at the origin: nothing blocks)

@@ -43,7 +43,6 @@ skipped and listed so.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -157,7 +156,7 @@ def predicted_costs(triangles: int, light_kind: str, normals: bool, receivers: i
 
 def calibration_receivers(given) -> Points | None:
     """The ``receivers=`` parameter checked: None, a ``Points``, points (N, 3) or ``(points, normals)``."""
-    if given is None or isinstance(given, (Points, FramedReceivers)):
+    if given is None or isinstance(given, Points):
         return given
     return check_points(*given) if isinstance(given, tuple) and len(given) == 2 else check_points(given)
 
@@ -184,34 +183,6 @@ def sample_indices(total: int, count: int, seed: int = SAMPLE_SEED) -> np.ndarra
 def calibration_sample(receivers: Points, count: int, seed: int = SAMPLE_SEED) -> Points:
     """``count`` of ``receivers`` stratified by index (:func:`sample_indices`), their normals with them."""
     return receivers.subset(sample_indices(len(receivers), count, seed))
-
-
-@dataclass(frozen=True, eq=False)
-class FramedReceivers:
-    """The caller's receivers (``world``, a ``Points``) as a method in the working ``frame`` sees them
-    (:class:`shadowcl.Shadows` hands them so), moved there only as they are drawn from: moving all
-    1.2 M took 40 ms, ~13 % of exact's call, for a sample of a few thousand."""
-
-    world: Points
-    frame: object
-
-    def __len__(self) -> int:
-        return len(self.world)
-
-    @property
-    def normals(self):
-        return self.world.normals
-
-    @property
-    def bounds(self) -> np.ndarray:
-        return self.frame.points(self.world.bounds)
-
-    @property
-    def positions(self) -> np.ndarray:
-        return self.frame.receivers(self.world).positions
-
-    def subset(self, index) -> Points:
-        return self.frame.receivers(self.world.subset(index))
 
 
 def bounds_sample(bounds: np.ndarray, count: int, seed: int = SAMPLE_SEED) -> Points:

@@ -62,14 +62,14 @@ class Shadows:
 
     def _copied(self, params: dict) -> dict:
         """``params`` deep-copied, with ``receivers`` (what method="auto" and lod="auto" calibrate on)
-        moved to the frame like every query's receivers (:class:`shadowcl.auto.FramedReceivers`: as they
-        are drawn from, and not copied)."""
+        moved to the frame like every query's receivers (:class:`shadowcl.points.MovedPoints`: moved as
+        they are drawn from, and not copied)."""
         receivers = params.get("receivers")
         copied = copy.deepcopy({key: value for key, value in params.items() if key != "receivers"})
         if receivers is None:
             return copied
-        from .auto import FramedReceivers, calibration_receivers
-        return {**copied, "receivers": FramedReceivers(calibration_receivers(receivers), self._frame)}
+        from .auto import calibration_receivers
+        return {**copied, "receivers": self._frame.receivers(calibration_receivers(receivers))}
 
     def relight(self, light) -> None:
         """Build the structure again for another ``light``, on the same method instance: what does not

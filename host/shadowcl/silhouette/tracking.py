@@ -278,14 +278,13 @@ class SilhouetteTracker:
         return np.concatenate(found)
 
 
-def _distinct(items: np.ndarray, slot: np.ndarray, positions: bool = False) -> np.ndarray:
-    """``items`` without repeats (in no particular order), or the ``positions`` of one of each, in
-    linear time: ``slot`` (scratch, one entry per possible item) keeps the last position that wrote
-    it. np.unique sorts or hashes, ~10x slower on these sizes."""
+def _distinct(items: np.ndarray, slot: np.ndarray) -> np.ndarray:
+    """``items`` without repeats (in no particular order), in linear time: ``slot`` (scratch, one entry
+    per possible item) keeps the last position that wrote it. np.unique sorts or hashes, ~10x slower on
+    these sizes."""
     where = np.arange(len(items))
     slot[items] = where
-    kept = where[slot[items] == where]
-    return kept if positions else items[kept]
+    return items[where[slot[items] == where]]
 
 
 class _DeviceWalks:
