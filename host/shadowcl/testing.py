@@ -58,20 +58,27 @@ def free_receivers(method: str, mesh: Mesh, light, points, normals, eps: float, 
     segment within FLOAT_BAND of a triangle edge, or its nearest hit within FLOAT_BAND of the start or
     the light, or a normal :func:`grazing` the light), the method's discretisation band (:data:`METHOD_BAND`), and, for a point light the
     method is given as the directional light (beyond its ``point_light_reach`` of ``reach``, the box of
-    the occluders and all the query's receivers), where the two lights' brute forces differ."""
+    the occluders and all the query's receivers), where the two lights' brute forces differ, and that
+    directional light's own float32 band."""
     v, f = mesh.vertices, mesh.faces
     # The method's band is the occluders' (a far receiver must not widen it: that would hide a map
     # coarsened by it); rounding grows with a receiver's own distance from them.
     occluders = bounds_diagonal(mesh.bounds)
     distance = np.linalg.norm(points - 0.5 * (mesh.bounds[0] + mesh.bounds[1]), axis=1)
     band = np.maximum(FLOAT_BAND * np.maximum(occluders, distance), METHOD_BAND[method] * occluders)
-    free = ref.segment_edge_distance(v, f, light, points, normals, eps) < band
-    free |= grazing(light, points, normals)
-    free |= ref.shadow_mask(v, f, light, points, normals, eps, margin=FLOAT_BAND * occluders) != \
-        ref.shadow_mask(v, f, light, points, normals, eps, margin=-FLOAT_BAND * occluders)
+    lights = [light]
+    free = np.zeros(len(points), dtype=bool)
     if is_distant(light, reach, method_class(method).point_light_reach):
         parallel = DirectionalLight(0.5 * (reach[0] + reach[1]) - light.position)
         free |= ref.shadow_mask(v, f, light, points, normals, eps) != ref.shadow_mask(v, f, parallel, points, normals, eps)
+        lights.append(parallel)   # the light the method answers for: its float32 band too (the point
+                                  # light's overflows in float64 beyond ~1e150)
+    for each in lights:
+        with np.errstate(over="ignore", invalid="ignore"):
+            free |= ref.segment_edge_distance(v, f, each, points, normals, eps) < band
+        free |= grazing(each, points, normals)
+        free |= ref.shadow_mask(v, f, each, points, normals, eps, margin=FLOAT_BAND * occluders) != \
+            ref.shadow_mask(v, f, each, points, normals, eps, margin=-FLOAT_BAND * occluders)
     return free
 
 
