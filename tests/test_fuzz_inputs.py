@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 import shadowcl as sc
 from conftest import fuzz
 
-FUZZ = fuzz(80, deadline=5000)
+FUZZ = fuzz(100, deadline=5000)
 FORMATS = ["obj", "off", "ply_ascii", "ply_le", "ply_be", "stl_ascii", "stl_binary"]
 SUFFIX = {"obj": ".obj", "off": ".off", "stl_ascii": ".stl", "stl_binary": ".stl"}
 BAD_NUMBERS = ["nan", "inf", "-inf", "1e39", "a", "1,5", "0x10", "--1", "\xff", "1e400"]

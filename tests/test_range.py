@@ -252,7 +252,7 @@ def test_huge_eps_is_honoured_by_the_shadow_map_and_refused_by_voxel(scene):
 PLACEMENTS = ("above", "far", "very far", "on a vertex", "near a face", "inside", "directional")
 
 
-@fuzz(24)
+@fuzz(96)
 @given(method=st.sampled_from(METHODS), occluder=st.sampled_from(("sphere", "box_minus_sphere")),
        log_scale=st.floats(-12.0, 15.0), offset=st.floats(-1e3, 1e3), placement=st.sampled_from(PLACEMENTS),
        seed=st.integers(0, 2 ** 16), normals=st.booleans(), far_receivers=st.booleans())

@@ -3,7 +3,8 @@
 ``prepare`` fits the light's view(s) to the receivers exactly as the exact method does
 (:func:`shadowcl.lightspace.fit_views`: orthographic for a directional light, one perspective view
 for a point light outside the receivers' box whose frustum stays within 120 degrees, else a cube of six
-faces), makes each window square, and draws each view's depth map with :func:`shadowcl.raster.depth_map`
+faces), cuts a single view's window to the occluders' projection (a receiver beyond it is lit:
+:func:`_cut_to_occluders`), makes each window square, and draws each view's depth map with :func:`shadowcl.raster.depth_map`
 (one rasterizer, two views; the maps stay on the device; with the default bias "plane" each texel also
 keeps the id of the triangle the light sees there). ``classify`` runs ``kernels/shadow_map.cl``: each
 receiver is transformed into light space and compared with what the map stored there.
