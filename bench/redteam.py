@@ -10,7 +10,8 @@ the ground and in the air round the occluders (random unit normals in the air, u
 Truth is the float64 brute force (``shadowcl.reference.exact``), judged by
 :func:`shadowcl.testing.wrong_receivers` (the float32 band, the method's discretisation band, a light
 used as directional beyond the method's reach). The voxel method (subdivision surfaces only) is judged
-against itself at scale 1 and against the exact method on its tessellation.
+against itself at scale 1 and against the exact method on its tessellation, with the surfaces' normals
+(it answers a point on its surfaces as with its outward normal).
 
 Each case ends in one of: ``right`` (no receiver wrong outside the band), ``refused (ARG:)`` (a
 ValueError/TypeError naming the argument; ``refused?`` when the message names none), ``WRONG n/N``
@@ -338,8 +339,16 @@ def voxel_method():
     for name in ("torus", "cube"):
         base = sc.Scene.load(project / "scenes" / "subdivision" / f"{name}.toml")
         ground = np.c_[RNG.uniform(-3.5, 3.5, 300), np.zeros(300), RNG.uniform(-3.5, 3.5, 300)]
-        body = base.objects[1][1].vertices[RNG.choice(len(base.objects[1][1].vertices), 100, replace=False)]
-        points = np.concatenate([ground, body.astype(np.float64)])
+        # receivers on the ground and on the object's tessellation, with their normals (up; outward, the
+        # vertices' summed face normals): the voxel method answers a point on its surfaces as with its
+        # surface normal, so exact is asked with them (without: an inside light lights them from inside)
+        tessellated = base.objects[1][1]
+        tri = tessellated.vertices[tessellated.faces].astype(np.float64)
+        vertex_normals = np.zeros((len(tessellated.vertices), 3))
+        np.add.at(vertex_normals, tessellated.faces.ravel(), np.repeat(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), 3, axis=0))
+        pick = RNG.choice(len(tessellated.vertices), 100, replace=False)
+        points = np.concatenate([ground, tessellated.vertices[pick].astype(np.float64)])
+        normals = np.concatenate([np.tile([0.0, 1.0, 0.0], (len(ground), 1)), vertex_normals[pick]])
         size = float(np.linalg.norm(np.ptp(base.bounds, 0)))
         centre = 0.5 * (base.bounds[0] + base.bounds[1])
 
@@ -354,7 +363,7 @@ def voxel_method():
             if kind != "ok":
                 add("voxel", f"{name} {what}", "voxel", "none", kind, mask)
                 return None
-            exact = sc.shadow_mask(scene, light, pts, method="exact", eps=eps)
+            exact = sc.shadow_mask(scene, light, pts, normals, method="exact", eps=eps)
             off = float(np.mean(mask != exact))
             note = f"differs from exact on {100 * off:.2f} %"
             bad = off > 0.03
@@ -372,9 +381,9 @@ def voxel_method():
             run(f"x{s:g} +{sizes:g} sizes", s, shift, sc.PointLight(light.position * s + shift), points * s + shift, reference)
         for sizes in (3.0, 1e3, 1e5, 1e9):
             run(f"light at {sizes:g} sizes", 1.0, np.zeros(3), sc.PointLight(centre + ODD[0] * sizes * size), points)
-        top = base.objects[1][1].vertices[np.argmax(base.objects[1][1].vertices[:, 1])].astype(np.float64)
+        top = tessellated.vertices[np.argmax(tessellated.vertices[:, 1])].astype(np.float64)
         run("light 1e-6 above the top", 1.0, np.zeros(3), sc.PointLight(top + [0, 1e-6 * size, 0]), points)
-        run("light inside the object", 1.0, np.zeros(3), sc.PointLight(base.objects[1][1].vertices.mean(0)), points)
+        run("light inside the object", 1.0, np.zeros(3), sc.PointLight(base.surfaces[1][1].vertices.mean(0)), points)
         for eps in (0.0, 1e-12, 0.3 * size):
             run(f"eps={eps:g}", 1.0, np.zeros(3), light, points, eps=eps)
 
