@@ -28,9 +28,10 @@
  *   LIGHT_POINT   1: point light at (lx, ly, lz); 0: directional light travelling along (lx, ly, lz) (unit)
  *   TEST_DOT5     0: watertight test (after the plane cull) on WT_FLOATS records; 1: dot5 on DOT5_FLOATS
  *   LISTS_LINKED  0: CSR lists (offsets, items); 1: linked lists (heads, nodes)
- *   INPUT_F64     1: points and normals arrive as float64 world coordinates and are made relative to
- *                 (ox, oy, oz) and rounded here, exactly as the host would (needs cl_khr_fp64);
- *                 0: they arrive as float32, already relative
+ *   INPUT_F64     1: points and normals arrive as float64 as the caller gave them, and are moved into
+ *                 the working frame ((x - c) * inv_scale, inv_scale a power of two: shadowcl.frame), made
+ *                 relative to (ox, oy, oz) and rounded here, exactly as the host would (needs
+ *                 cl_khr_fp64); 0: they arrive as float32, already moved and relative (c 0, inv_scale 1)
  *   LANES         receivers per packet (vecmath.h)
  *   NVIEWS, PERSPECTIVE: the light-space grid (lightspace.h)
  * Everything else (normals given or not, coarse lists empty or not) is an argument: one program serves
@@ -73,10 +74,13 @@ typedef float input_t;
 
 /* Receiver i's start s (relative float32) and tmin, or its code when it needs no walk (1, 3, 4). */
 INLINE int receiver_start(int i, __global const input_t *points, __global const input_t *normals,
-                          input_t ox, input_t oy, input_t oz, float lx, float ly, float lz, float eps,
-                          int with_normals, float *px, float *py, float *pz, float *ptmin)
+                          input_t cx, input_t cy, input_t cz, input_t inv_scale, input_t ox, input_t oy,
+                          input_t oz, float lx, float ly, float lz, float eps, int with_normals, float *px,
+                          float *py, float *pz, float *ptmin)
 {
-    float sx = (float)(points[3 * i] - ox), sy = (float)(points[3 * i + 1] - oy), sz = (float)(points[3 * i + 2] - oz);
+    /* the frame's move (x - c) / 2^k, then the local origin, in the input precision: the host's bits */
+    float sx = (float)((points[3 * i] - cx) * inv_scale - ox), sy = (float)((points[3 * i + 1] - cy) * inv_scale - oy),
+          sz = (float)((points[3 * i + 2] - cz) * inv_scale - oz);
     if (!(SC_FINITE(sx) & SC_FINITE(sy) & SC_FINITE(sz)))
         return 3;
     /* Back-facing receivers are in shadow; the others start eps along their (unit) normal */
@@ -130,12 +134,12 @@ INLINE int receiver_cell(__constant const float *views, int brute_cell, float sx
 }
 
 #define BIN_ARGS                                                                                     \
-    __global const input_t *points, __global const input_t *normals, int n, input_t ox, input_t oy,  \
-        input_t oz, __constant const float *views, int brute_cell, float lx, float ly, float lz, float eps, \
-        int with_normals
+    __global const input_t *points, __global const input_t *normals, int n, input_t cx, input_t cy,  \
+        input_t cz, input_t inv_scale, input_t ox, input_t oy, input_t oz, __constant const float *views, \
+        int brute_cell, float lx, float ly, float lz, float eps, int with_normals
 
-/* Pass 1. Contract: points (n x 3, float32 relative to the local origin, or float64 world with
- * INPUT_F64 and the origin in (ox, oy, oz)), normals likewise if with_normals (any non-zero length); views:
+/* Pass 1. Contract: points (n x 3, float32 relative to the local origin, or float64 with INPUT_F64,
+ * the frame's move in (cx, cy, cz, inv_scale) and the origin in (ox, oy, oz)), normals likewise if with_normals (any non-zero length); views:
  * the grid the lists were built on; counts: brute_cell + 1 ints, zeroed. Writes out[i] (the code of a
  * receiver needing no walk, else 0) and slot[i] (its rank in its cell, -1 when it needs no walk); for a
  * receiver with a slot, start[i] = (s, tmin). */
@@ -147,7 +151,8 @@ __kernel void exact_bin_count(BIN_ARGS, __global int *counts, __global int *slot
         return;
     float sx, sy, sz, tmin;
     int coarse, s = -1;
-    const int code = receiver_start(i, points, normals, ox, oy, oz, lx, ly, lz, eps, with_normals, &sx, &sy, &sz, &tmin);
+    const int code = receiver_start(i, points, normals, cx, cy, cz, inv_scale, ox, oy, oz, lx, ly, lz, eps, with_normals,
+                                    &sx, &sy, &sz, &tmin);
     if (code == WALK) {
         const int fine = receiver_cell(views, brute_cell, sx, sy, sz, &coarse);
         start[i] = (float4)(sx, sy, sz, tmin);
@@ -321,7 +326,8 @@ __kernel void exact_classify_points(BIN_ARGS, __global const float *tris, int nt
     if (i >= n)
         return;
     float sx, sy, sz, tmin;
-    const int code = receiver_start(i, points, normals, ox, oy, oz, lx, ly, lz, eps, with_normals, &sx, &sy, &sz, &tmin);
+    const int code = receiver_start(i, points, normals, cx, cy, cz, inv_scale, ox, oy, oz, lx, ly, lz, eps, with_normals,
+                                    &sx, &sy, &sz, &tmin);
     if (code != WALK) {
         out[i] = (uchar)code;
         return;

@@ -106,3 +106,19 @@ def test_include_with_trailing_comment(kernel_dir):
     source = VALUE_KERNEL.replace('#include "value.h"', '#include "value.h"  // HEADER_VALUE')
     (kernel_dir / "value.cl").write_text(source)
     assert run_value(sc.Device(kernel_dir=kernel_dir), ("-DVALUE=3",)) == 103
+
+
+def test_input_view_shares_host_memory_only_where_the_device_does(device, monkeypatch):
+    """A CPU device reads a call's inputs in place (CL_MEM_USE_HOST_PTR); a device with memory of its own
+    (a discrete GPU) gets a copy; either way the kernels read the array's values."""
+    array = np.arange(12, dtype=np.float64).reshape(4, 3)
+    assert device.shares_host_memory == bool(device.cl_device.type & cl.device_type.CPU or
+                                             device.cl_device.host_unified_memory)
+    buffers = {}
+    for shares in (True, False):
+        monkeypatch.setattr(type(device), "shares_host_memory", property(lambda self, shares=shares: shares))
+        buffers[shares] = device.input_view(array)
+    assert buffers[True].flags & cl.mem_flags.USE_HOST_PTR and not buffers[True].flags & cl.mem_flags.COPY_HOST_PTR
+    assert buffers[False].flags & cl.mem_flags.COPY_HOST_PTR and not buffers[False].flags & cl.mem_flags.USE_HOST_PTR
+    for buffer in buffers.values():
+        assert np.array_equal(device.from_device(buffer, (4, 3), np.float64), array)

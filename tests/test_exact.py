@@ -152,7 +152,7 @@ def test_receiver_binning_that_drops_receivers_raises(device, monkeypatch):
 
         def run(queue, gsize, lsize, *args):
             kernel(queue, gsize, lsize, *args)
-            counts, cells = args[13], int(args[7]) + 1      # after the 13 BIN_ARGS; brute_cell + 1 cells
+            counts, cells = args[17], int(args[11]) + 1     # after the 17 BIN_ARGS; brute_cell + 1 cells
             cl.enqueue_fill_buffer(queue, counts, np.int32(1), 0, 4 * cells)
         return run
 

@@ -280,3 +280,46 @@ def test_an_empty_subset_with_normals_has_empty_unit_normals():
     empty = receivers.subset(np.zeros(3, dtype=bool))
     assert empty.unit_normals().shape == (0, 3)
     assert empty.facing_away(sc.PointLight((0, 1, 0))).shape == (0,)
+
+
+def test_moved_points_are_the_host_move_bit_for_bit_and_read_lazily(rng):
+    """The working frame moves receivers lazily (MovedPoints): the same bits as (x - c) * (1 / 2^k) in
+    float64, a subset and Points.near the same as on eagerly moved points, and len() reads nothing."""
+    from shadowcl.points import MovedPoints, Points, check_points
+    world = check_points(rng.uniform(-1e3, 1e3, (5_000, 3)) + 1e6 * rng.normal(size=3), rng.normal(size=(5_000, 3)))
+    centre, scale = world.positions[17] + 0.123, 2.0 ** 11
+    moved = MovedPoints(world, centre, scale, (world.bounds - centre) / scale)
+    assert len(moved) == 5_000 and "positions" not in vars(moved)
+    eager = Points((world.positions - centre) * (1.0 / scale), world.normals, moved.bounds)
+    assert np.array_equal(moved.positions, eager.positions)
+    index = rng.choice(5_000, 300, replace=False)
+    assert np.array_equal(moved.subset(index).positions, eager.subset(index).positions)
+    assert np.array_equal(moved.subset(index).bounds, eager.subset(index).bounds)
+    for k in rng.choice(5_000, 20, replace=False):      # boxes round real receivers, of several sizes
+        point, reach = eager.positions[k], float(rng.choice([1e-9, 1e-3, 0.1, 0.3]))
+        fresh = MovedPoints(world, centre, scale, moved.bounds)
+        assert np.array_equal(fresh.near(point, reach), eager.near(point, reach))
+        assert "positions" not in vars(fresh)
+
+
+@pytest.mark.parametrize("with_normals", [True, False], ids=["normals", "no-normals"])
+def test_exact_moves_receivers_on_the_device_as_the_host_does(device, rng, with_normals):
+    """The exact method fuses the frame's move into its first pass: its masks on MovedPoints equal its
+    masks on the same receivers moved on the host first, on a scene far from the origin."""
+    from shadowcl.exact import ExactMethod
+    from shadowcl.points import MovedPoints, Points, check_points
+    from shadowcl.testing import icosphere
+    mesh = icosphere(3).moved(-np.array([3e5, -2e5, 1e5]), 1.0)
+    points = rng.uniform(-3, 3, (20_000, 3)) * [1, 0, 1] + [3e5, -2e5 - 1.2, 1e5]
+    normals = np.tile([0.0, 1.0, 0.0], (len(points), 1)) if with_normals else None
+    world = check_points(points, normals)
+    centre, scale = 0.5 * (mesh.bounds[0] + mesh.bounds[1]), 4.0
+    framed_mesh = mesh.moved(centre, scale)
+    moved = MovedPoints(world, centre, scale, (world.bounds - centre) / scale)
+    eager = Points(moved.positions.copy(), world.normals, moved.bounds)
+    method = ExactMethod(device)
+    method.prepare(framed_mesh, sc.PointLight((np.array([3e5, -2e5 + 4, 1e5 + 0.5]) - centre) / scale),
+                   moved.bounds, 1e-4)
+    fused = method.classify(MovedPoints(world, centre, scale, moved.bounds))
+    host = method.classify(eager)
+    assert 0.05 < fused.mean() < 0.95 and np.array_equal(fused, host)

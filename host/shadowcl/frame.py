@@ -40,7 +40,7 @@ import numpy as np
 
 from .geometry import Mesh, bounds_diagonal
 from .lights import DirectionalLight, PointLight
-from .points import Points
+from .points import MovedPoints, Points
 
 MIN_EXTENT = 1e-30               # smallest occluder box diagonal accepted (float32 normals end at 1.2e-38)
 MAX_RECEIVER_DISTANCE = 2.0 ** 30   # scene sizes: squares (2^60) and cubes (2^90) stay far below float32's 2^128
@@ -82,11 +82,10 @@ class Frame:
                 f"points: {int(far.sum())} receiver(s) lie more than {MAX_RECEIVER_DISTANCE:.3g} scene sizes "
                 f"({self.extent:.3g}) from the occluders' centre, outside the working range (first at index "
                 f"{first}: {receivers.positions[first].tolist()})")
-        # In place, and the box moved rather than recomputed: x -> (x - c) / 2^k is monotonic, so it
-        # maps the bounds onto the moved points' bounds exactly (1.2 M receivers: 0.13 -> 0.03 s).
-        positions = np.subtract(receivers.positions, self.centre)
-        positions *= 1.0 / self.scale
-        return Points(positions, receivers.normals, self.points(receivers.bounds))
+        # The box moved rather than recomputed: x -> (x - c) / 2^k is monotonic, so it maps the bounds
+        # onto the moved points' bounds exactly; the points themselves are moved when first read (or on
+        # the device, by a method that fuses the move into its first pass).
+        return MovedPoints(receivers, self.centre, self.scale, self.points(receivers.bounds))
 
     def light(self, light, reach: np.ndarray, limit: float = DIRECTIONAL_DISTANCE):
         """``light`` as the methods get it, for receivers in the world box ``reach`` (which must hold the

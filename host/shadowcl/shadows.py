@@ -193,10 +193,7 @@ class Shadows:
         # Only receivers within 2 eps of the light per axis can qualify (the start is eps from the
         # point): narrowed axis by axis, so the light inside a crowd of receivers costs one column
         # pass, not norms and facing tests of them all (1.2 M receivers: 113 -> ~5 ms).
-        positions, reach = receivers.positions, 2.0 * eps * (1.0 + 1e-6)
-        near = np.flatnonzero(np.abs(positions[:, 0] - light.position[0]) <= reach)
-        for axis in (1, 2):
-            near = near[np.abs(positions[near, axis] - light.position[axis]) <= reach]
+        near = receivers.near(light.position, 2.0 * eps * (1.0 + 1e-6))
         if len(near) == 0:
             return near
         candidates = receivers.subset(near)
