@@ -44,7 +44,7 @@ BAD_INPUTS = [
     (lambda: shadow_mask(MESH, LIGHT, np.zeros((2, 3)), eps=[1e-3]), TypeError, r"eps: expected a number"),
     (lambda: shadow_mask(MESH, LIGHT, [[1e39, 0, 0]]), ValueError, r"points: coordinates overflow float32"),
     (lambda: sc.render(MESH), TypeError, r"scene: expected a shadowcl.Scene"),
-    (lambda: sc.Mesh.load("model.xyz"), ValueError, r"path: unsupported mesh format '.xyz'"),
+    (lambda: sc.Mesh.load("model.xyz"), ValueError, r"path: model.xyz: unsupported mesh format '.xyz'"),
     (lambda: sc.Mesh.load("/no/such/model.obj"), FileNotFoundError, r"path: no mesh file at /no/such/model.obj"),
     (lambda: sc.Mesh.load(None), TypeError, r"path: expected a file path, got NoneType"),
     (lambda: sc.PointLight((10**400, 0, 0)), ValueError, r"position: .* is beyond the floating-point range"),
