@@ -29,6 +29,10 @@ BAD_INPUTS = [
     (lambda: sc.DirectionalLight((0, 0, 0)), ValueError, r"direction: must have non-zero length"),
     (lambda: sc.PointLight((0, np.nan, 0)), ValueError, r"position: must be finite"),
     (lambda: sc.PointLight((0, 1)), ValueError, r"position: expected three numbers"),
+    # booleans and strings are not coordinates (the red team's PointLight((True, 0, -1)) was (1, 0, -1))
+    (lambda: sc.PointLight((True, 0, -1)), TypeError, r"position: expected three numbers"),
+    (lambda: sc.DirectionalLight(("1", 0, 0)), TypeError, r"direction: expected three numbers"),
+    (lambda: sc.DirectionalLight(np.ones(3, dtype=bool)), TypeError, r"direction: expected three numbers"),
     (lambda: sc.Camera((0, 0, 0), (0, 0, 0)), ValueError, r"target: must differ from the eye position"),
     (lambda: sc.Camera((0, 0, 0), (0, 1, 0)), ValueError, r"up: must not be parallel"),
     (lambda: sc.Camera((0, 0, 0), (0, 0, 1), fov=190), ValueError, r"fov: must be below 180"),
