@@ -665,6 +665,9 @@ def main(argv=None) -> int:
                 NUMERIC[name]()
             else:
                 HOSTILE[name](Path(folder))
+    for row in ROWS:   # the temporary folder's name changes from run to run
+        for key in ("result", "note", "value"):
+            row[key] = row[key].replace(folder, "TMP")
     stem = "redteam" if not args.only else "redteam-" + "-".join(args.only)
     doc = {"load": load, "seconds": time.perf_counter() - start, "rows": ROWS}
     save(args.out, stem, doc, markdown(ROWS) + f"\nLoad average at the start {load[0]:.1f}; {doc['seconds']:.0f} s.\n")
