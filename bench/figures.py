@@ -188,15 +188,18 @@ def angular_cells() -> tuple[str, str]:
 
 
 def caps_error() -> str:
-    """The two tables' false shadows on receivers lying on closed occluders, per kind of occluder."""
+    """The two tables' false shadows on receivers lying on closed occluders, per kind of occluder, and their
+    false lights on the ground under them (every scene and light)."""
     rows = load("angular_caps.json")["rows"]
     convex = [r for r in rows if r["scene"] in ("sphere", "cylinder", "torus") and r["light"].startswith("directional")]
     concave = [r for r in rows if r["scene"] == "box_minus_sphere"]
     return "; ".join(
-        f"{what}: faces {span([100 * r['faces_occluder_false_shadow'] for r in part])} %, loops "
-        f"{span([100 * r['loops_occluder_false_shadow'] for r in part])} %"
-        for what, part in (("curved caps (sphere, torus, cylinder), directional light", convex),
-                           ("box minus sphere", concave)))
+        [f"{what}: faces {span([100 * r['faces_occluder_false_shadow'] for r in part])} %, loops "
+         f"{span([100 * r['loops_occluder_false_shadow'] for r in part])} %"
+         for what, part in (("curved caps (sphere, torus, cylinder), directional light", convex),
+                            ("box minus sphere", concave))]
+        + [f"the ground under them, falsely lit: faces {span([100 * r['faces_ground_false_light'] for r in rows])} %, "
+           f"loops {span([100 * r['loops_ground_false_light'] for r in rows])} %"])
 
 
 METHOD_ROWS = [  # method, paper, status (static prose), and the function giving its two figure cells
@@ -217,10 +220,10 @@ METHOD_ROWS = [  # method, paper, status (static prose), and the function giving
      "kernel in `render`, per-point cap count in `shadow_mask`", "done", shadow_volume_cells),
     ("`angular`", "Thakur, Cheng & Miura: ridge-edge loops, span table per θ row built on the device: `table=\"loops\"` "
      "the paper's (ridge-edge crossings paired by §4's rule, chord depth, creases in duplicate), `table=\"faces\"` "
-     "(default, faster: one span per light-facing face, exact depth; the same error on open meshes and on "
-     "receivers off the occluders, but a receiver on a closed occluder's lit cap meets a neighbouring face's plane "
-     "half a row off its span: see the error cell), binary-search lookups, scan-line "
-     "runs in `render`, several lights (`shadow_counts`), light inside", "done", angular_cells),
+     "(default: one record per light-facing face and row band it meets, its span over the whole band, and the hit "
+     "tested on the triangle itself, watertight edge functions after the plane: no discretization error), "
+     "binary-search lookups, scan-line runs in `render`, several lights (`shadow_counts`), light inside", "done",
+     angular_cells),
 ]
 
 
@@ -233,7 +236,8 @@ def methods_table() -> str:
 
 def auto_table() -> str:
     """method="auto" and lod="auto" per budget, from ``auto.json`` (bench/auto.py)."""
-    rows = load("auto.json")["rows"]
+    doc = load("auto.json")
+    rows = doc["rows"]
     lines = ["| budget | cases | budget broken: auto / lod=\"auto\" | auto / exact: median, worst | "
              "auto / sweep's oracle: median, worst | chosen (most frequent per case) |", "|---|---|---|---|---|---|"]
     for budget in sorted({r["budget"] for r in rows}, reverse=True):
@@ -246,8 +250,11 @@ def auto_table() -> str:
                      f"{np.median(oracle):.2f}, {max(oracle):.2f} | "
                      f"{', '.join(f'{c} {n}' for c, n in chosen.items())} |")
     scenes = sorted({r["scene"] for r in rows}, key=[r["scene"] for r in rows].index)
+    loads = doc["settings"].get("load")
+    load_note = f"; load average {loads[0][0]:.1f} at the start, {loads[1][0]:.1f} at the end on 2 cores" if loads else ""
     lines.append(f"\nScenes: {', '.join(scenes)}, {count(rows[0]['receivers'])} receivers, with and without normals "
-                 f"(`auto.json`; per case: `bench/results/auto.md`).")
+                 f"(`auto.json`, {doc['settings']['repeats']} interleaved rounds{load_note}; per case: "
+                 f"`bench/results/auto.md`).")
     return "\n".join(lines)
 
 

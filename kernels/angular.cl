@@ -7,12 +7,15 @@
  * (monotone in the paper's phi = atan(X / -Z) on every row). Directional light (LIGHT_POINT 0):
  * light comes from +Z, a row is the plane Y = const and s = X.
  *
- * Table (CSR by row, rows sorted by s_lo): one record per (light-facing face, row it crosses),
- * 8 floats: s_lo, s_hi (the face's span in the row: the paper's pair of RE / visible-edge crossings,
- * visible edges thus entering "in duplicate"), then the face plane n.x = d (light on its positive
- * side), used for the depth test: exact depth instead of interpolating r between the pair's ends;
- * then the face index (int bits) and the running maximum of s_hi along the row (set by sort_rows).
- * An empty span (the row's centre grazes the face) is s_lo = 2 > s_hi = -2 and never matches.
+ * Table (CSR by row, rows sorted by s_lo): one record per (light-facing face, row whose band it meets),
+ * 8 floats: s_lo, s_hi (the face's span over the whole row band, padded for float32: every direction of
+ * the face whose row coordinate lies in the band has its s in it; the paper's pair of RE / visible-edge
+ * crossings, visible edges thus entering "in duplicate"), then the face plane n.x = d (light on its
+ * positive side), used for the depth test: exact depth instead of interpolating r between the pair's ends;
+ * then the face index (int bits) and the running maximum of s_hi along the row (set by sort_rows). A
+ * lookup tests the face itself (its plane, then its edges: record_blocks), never the plane past its edges.
+ * A wide span is cut into up to MAX_PIECES records (face_rows), so the running maximum stops lookups early.
+ * An empty span (the face misses the band) is s_lo = 2 > s_hi = -2 and never matches.
  * The paper's table (host table="loops") puts loop pairs in the same record layout: s_lo, s_hi of a pair
  * of ridge-edge crossings (edge_rows, fill_edges, pair_rows below), the plane of the chord between them
  * (depth interpolated between the pair's ends), -(region + 1) in place of the face; the lookups are
@@ -113,13 +116,22 @@ INLINE int wrap_row(int k, int rows)
 #endif
 }
 
+#define MAX_PIECES 64
+
 /* face_rows: one work-item per table face. Writes the face plane (oriented with the light on its
- * positive side; all zeros for an edge-on or zero-area face), the first row (unwrapped) and the number of
- * rows whose centre lies in the face's row-coordinate range (the host sums them per row). */
+ * positive side; all zeros for an edge-on or zero-area face), the first row (unwrapped), the number of
+ * rows whose band [t0 + k dt, t0 + (k + 1) dt] meets the face's row-coordinate range widened by its pad
+ * (the host sums them per row, times the pieces), that pad, and the pieces its span is cut into in every
+ * row: its corners' s extent over piece_width, 1 to MAX_PIECES (a lookup's backward scan stops where the
+ * row's running maximum of s_hi falls below s, so a span across the whole row, a ground under the
+ * occluders, made every lookup walk the row back to its start). pad_t: the float32 error allowance of a
+ * receiver's row coordinate (radians for a point light, where it grows as r / rho near the pole axis: the
+ * pad is pad_t max(1, r / rho) over the corners; a length for a directional light). */
 __kernel void face_rows(const __global float *vertices, const __global float *relative, const __global int *faces,
                         const __global int *face_ids, const int nfaces, const float t0, const float dt, const int rows,
-                        const float anc_x, const float anc_y, const float anc_z,
-                        __global float *planes, __global int *first_row, __global int *row_count)
+                        const float anc_x, const float anc_y, const float anc_z, const float pad_t,
+                        const float piece_width, __global float *planes, __global int *first_row,
+                        __global int *row_count, __global float *pads, __global int *pieces)
 {
     const int i = get_global_id(0);
     if (i >= nfaces) return;
@@ -146,11 +158,11 @@ __kernel void face_rows(const __global float *vertices, const __global float *re
     planes[4 * i + 1] = blocks ? ny : 0.0f;
     planes[4 * i + 2] = blocks ? nz : 0.0f;
     planes[4 * i + 3] = blocks ? d : 0.0f;
-    /* Row range: the rows whose centre t0 + (k + 0.5) dt lies in [tmin, tmax] */
+    /* Row range: the rows whose band meets [tmin - pad, tmax + pad] */
     LOAD3(vertices, faces[3 * f], x0, y0, z0);
     LOAD3(vertices, faces[3 * f + 1], x1, y1, z1);
     LOAD3(vertices, faces[3 * f + 2], x2, y2, z2);
-    float tmin, tmax;
+    float tmin, tmax, pad = pad_t;
     const float ta = row_coordinate(y0, z0), tb = row_coordinate(y1, z1), tc = row_coordinate(y2, z2);
     bool all_rows = false;
 #if LIGHT_POINT
@@ -163,12 +175,18 @@ __kernel void face_rows(const __global float *vertices, const __global float *re
     /* the YZ projection (u, v) = (y, -z) contains the origin: edge functions of one sign */
     const float e0 = y0 * (-z1) - (-z0) * y1, e1 = y1 * (-z2) - (-z1) * y2, e2 = y2 * (-z0) - (-z2) * y0;
     all_rows = (e0 >= 0.0f && e1 >= 0.0f && e2 >= 0.0f) || (e0 <= 0.0f && e1 <= 0.0f && e2 <= 0.0f);
+    /* a direction's theta rounds by ~ulp * r / rho (rho its distance from the pole axis) */
+    const float rho = SC_MIN(SC_SQRT(y0 * y0 + z0 * z0), SC_MIN(SC_SQRT(y1 * y1 + z1 * z1), SC_SQRT(y2 * y2 + z2 * z2)));
+    const float r = SC_MAX(SC_SQRT(x0 * x0 + y0 * y0 + z0 * z0),
+                           SC_MAX(SC_SQRT(x1 * x1 + y1 * y1 + z1 * z1), SC_SQRT(x2 * x2 + y2 * y2 + z2 * z2)));
+    pad = rho > r * pad_t ? pad_t * SC_MAX(1.0f, r / rho) : 2.0f * PI_F;
+    all_rows = all_rows || tmax - tmin + 2.0f * pad >= 2.0f * PI_F;
 #else
     tmin = SC_MIN(ta, SC_MIN(tb, tc));
     tmax = SC_MAX(ta, SC_MAX(tb, tc));
 #endif
-    int k0 = (int)ceil((tmin - t0) / dt - 0.5f);
-    int k1 = (int)SC_FLOOR((tmax - t0) / dt - 0.5f);
+    int k0 = (int)SC_FLOOR((tmin - pad - t0) / dt);
+    int k1 = (int)SC_FLOOR((tmax + pad - t0) / dt);
     if (all_rows) {
         k0 = 0;
         k1 = rows - 1;
@@ -181,66 +199,105 @@ __kernel void face_rows(const __global float *vertices, const __global float *re
     n = max(n, 0);
     first_row[i] = k0;
     row_count[i] = n;
+    pads[i] = pad;
+#if LIGHT_POINT
+    const float sa = x0 / SC_MAX(SC_SQRT(x0 * x0 + y0 * y0 + z0 * z0), 1e-30f);
+    const float sb = x1 / SC_MAX(SC_SQRT(x1 * x1 + y1 * y1 + z1 * z1), 1e-30f);
+    const float sc = x2 / SC_MAX(SC_SQRT(x2 * x2 + y2 * y2 + z2 * z2), 1e-30f);
+    const float extent = all_rows ? 2.0f : SC_MAX(sa, SC_MAX(sb, sc)) - SC_MIN(sa, SC_MIN(sb, sc));
+#else
+    const float extent = SC_MAX(x0, SC_MAX(x1, x2)) - SC_MIN(x0, SC_MIN(x1, x2));
+#endif
+    pieces[i] = clamp((int)ceil(extent / piece_width), 1, MAX_PIECES);
 }
 
-/* Span of a face in row k: s interval of its cut by the row's half-plane (point) or plane (directional). */
-INLINE void face_span(float x0, float y0, float z0, float x1, float y1, float z1, float x2, float y2, float z2,
-                      float tk, float *lo, float *hi)
+/* Clip the convex polygon (px, py, pz)[0..n) to g(p) = gx x + gy y + gz z + g0 >= 0 (in place; at most 5
+ * corners: a triangle cut by two planes). Returns the new corner count. */
+INLINE int clip_polygon(float *px, float *py, float *pz, int n, float gx, float gy, float gz, float g0)
 {
-#if LIGHT_POINT
-    const float my = cos(tk), mz = sin(tk);       /* plane normal (0, cos, sin); in-plane axis w = (0, sin, -cos) */
-    const float wy = mz, wz = -my;
-    const float s0 = my * y0 + mz * z0, s1 = my * y1 + mz * z1, s2 = my * y2 + mz * z2;
-#else
-    const float s0 = y0 - tk, s1 = y1 - tk, s2 = y2 - tk;
-#endif
-    float pa[2], pb[2];
+    float qx[5], qy[5], qz[5];
     int m = 0;
-    const float px[3] = {x0, x1, x2}, py[3] = {y0, y1, y2}, pz[3] = {z0, z1, z2}, ps[3] = {s0, s1, s2};
-    for (int e = 0; e < 3; ++e) {
-        const int g = e == 2 ? 0 : e + 1;
-        if ((ps[e] > 0.0f) != (ps[g] > 0.0f) && m < 2) {
-            const float t = ps[e] / (ps[e] - ps[g]);
-            const float cx = px[e] + t * (px[g] - px[e]);
-#if LIGHT_POINT
-            const float cy = py[e] + t * (py[g] - py[e]), cz = pz[e] + t * (pz[g] - pz[e]);
-            pa[m] = cx;
-            pb[m] = wy * cy + wz * cz;
-#else
-            pa[m] = cx;
-            pb[m] = 0.0f;
-#endif
+    for (int e = 0; e < n; ++e) {
+        const int g = e + 1 == n ? 0 : e + 1;
+        const float ge = gx * px[e] + gy * py[e] + gz * pz[e] + g0, gg = gx * px[g] + gy * py[g] + gz * pz[g] + g0;
+        if (ge >= 0.0f && m < 5) {
+            qx[m] = px[e]; qy[m] = py[e]; qz[m] = pz[e]; ++m;
+        }
+        if ((ge >= 0.0f) != (gg >= 0.0f) && m < 5) {
+            const float t = ge / (ge - gg);
+            qx[m] = px[e] + t * (px[g] - px[e]); qy[m] = py[e] + t * (py[g] - py[e]); qz[m] = pz[e] + t * (pz[g] - pz[e]);
             ++m;
         }
     }
-    *lo = EMPTY_LO;
-    *hi = EMPTY_HI;
-    if (m < 2) return;
-#if LIGHT_POINT
-    /* keep the part on the row's half-plane (b >= 0): a face round the pole is cut at the X axis */
-    if (pb[0] < 0.0f && pb[1] < 0.0f) return;
-    if (pb[0] < 0.0f || pb[1] < 0.0f) {
-        const int neg = pb[0] < 0.0f ? 0 : 1;
-        const float u = pb[1 - neg] / (pb[1 - neg] - pb[neg]);
-        pa[neg] = pa[1 - neg] + u * (pa[neg] - pa[1 - neg]);
-        pb[neg] = 0.0f;
+    for (int j = 0; j < m; ++j) {
+        px[j] = qx[j]; py[j] = qy[j]; pz[j] = qz[j];
     }
-    const float sa = pa[0] / SC_SQRT(pa[0] * pa[0] + pb[0] * pb[0]);
-    const float sb = pa[1] / SC_SQRT(pa[1] * pa[1] + pb[1] * pb[1]);
-#else
-    const float sa = pa[0], sb = pa[1];
-#endif
-    *lo = SC_MIN(sa, sb);
-    *hi = SC_MAX(sa, sb);
+    return m;
 }
 
-/* fill_rows: one work-item per table face; writes its record in every row it spans, at the row's
- * offset plus a slot taken from the row's cursor (offsets from the exclusive prefix sum of counts). A slot
- * past the row's end is not written; the cursor still counts it and the host checks (check_rows_filled). */
+/* Span of a face over row band [ta, tb]: the s interval of the directions of the face whose row coordinate
+ * lies in the band (the face clipped to the band's wedge, point light, or slab, directional), widened by
+ * pad_s; (EMPTY_LO, EMPTY_HI) when it misses the band. Point light: s = x / |p| has no extremum on the
+ * unit sphere but at the poles +-X, so it is extreme at a corner of the clipped polygon or inside an edge,
+ * where the edge's great circle comes nearest +-X (s = +-sqrt(1 - nx^2 / |n|^2), n = a x b); a band a
+ * half-turn wide or more is not clipped (its wedge is not convex): the face's whole s extent. */
+INLINE void band_span(float x0, float y0, float z0, float x1, float y1, float z1, float x2, float y2, float z2,
+                      float ta, float tb, float pad_s, float *lo, float *hi)
+{
+    float px[5] = {x0, x1, x2}, py[5] = {y0, y1, y2}, pz[5] = {z0, z1, z2};
+    int n = 3;
+    *lo = EMPTY_LO;
+    *hi = EMPTY_HI;
+#if LIGHT_POINT
+    /* theta >= ta: sin(theta - ta) >= 0, i.e. (0, cos ta, sin ta) . p >= 0; theta <= tb likewise */
+    if (tb - ta < PI_F) {
+        n = clip_polygon(px, py, pz, n, 0.0f, cos(ta), sin(ta), 0.0f);
+        n = clip_polygon(px, py, pz, n, 0.0f, -cos(tb), -sin(tb), 0.0f);
+    }
+    if (n < 3) return;
+    float s_lo = 1.0f, s_hi = -1.0f;
+    for (int e = 0; e < n; ++e) {
+        const int g = e + 1 == n ? 0 : e + 1;
+        const float r = SC_SQRT(px[e] * px[e] + py[e] * py[e] + pz[e] * pz[e]);
+        const float s = r > 0.0f ? px[e] / r : 0.0f;
+        s_lo = SC_MIN(s_lo, s);
+        s_hi = SC_MAX(s_hi, s);
+        /* inside the edge: its great circle's nearest point to +X, c = X - (n_x / |n|^2) n, when the arc holds it */
+        const float nx = py[e] * pz[g] - pz[e] * py[g], ny = pz[e] * px[g] - px[e] * pz[g], nz = px[e] * py[g] - py[e] * px[g];
+        const float nn = nx * nx + ny * ny + nz * nz;
+        if (!(nn > 0.0f)) continue;
+        const float k = nx / nn, cx = 1.0f - k * nx, cy = -k * ny, cz = -k * nz;
+        /* (a x c) . n and (c x b) . n: c between a and b on the arc (their signs flip together for -c) */
+        const float u = dot3(py[e] * cz - pz[e] * cy, pz[e] * cx - px[e] * cz, px[e] * cy - py[e] * cx, nx, ny, nz);
+        const float v = dot3(cy * pz[g] - cz * py[g], cz * px[g] - cx * pz[g], cx * py[g] - cy * px[g], nx, ny, nz);
+        const float peak = SC_SQRT(SC_MAX(0.0f, 1.0f - k * nx));
+        if (u >= 0.0f && v >= 0.0f) s_hi = SC_MAX(s_hi, peak);
+        if (u <= 0.0f && v <= 0.0f) s_lo = SC_MIN(s_lo, -peak);
+    }
+#else
+    n = clip_polygon(px, py, pz, n, 0.0f, 1.0f, 0.0f, -ta);
+    n = clip_polygon(px, py, pz, n, 0.0f, -1.0f, 0.0f, tb);
+    if (n < 2) return;
+    float s_lo = px[0], s_hi = px[0];
+    for (int e = 1; e < n; ++e) {
+        s_lo = SC_MIN(s_lo, px[e]);
+        s_hi = SC_MAX(s_hi, px[e]);
+    }
+#endif
+    *lo = s_lo - pad_s;
+    *hi = s_hi + pad_s;
+}
+
+/* fill_rows: one work-item per table face; writes its records in every row it spans -- its span cut into
+ * pieces[i] equal parts (ends shared bit for bit: an s on a cut lies in both), or as many empty records
+ * when it misses the band -- each at the row's offset plus a slot taken from the row's cursor (offsets
+ * from the exclusive prefix sum of counts). A slot past the row's end is not written; the cursor still
+ * counts it and the host checks (lists.check_filled). */
 __kernel void fill_rows(const __global float *vertices, const __global int *faces, const __global int *face_ids,
-                        const int nfaces, const float t0, const float dt, const int rows,
+                        const int nfaces, const float t0, const float dt, const int rows, const float pad_s,
                         const __global float *planes, const __global int *first_row, const __global int *row_count,
-                        const __global int *offsets, volatile __global int *cursor, __global float *records)
+                        const __global float *pads, const __global int *pieces, const __global int *offsets,
+                        volatile __global int *cursor, __global float *records)
 {
     const int i = get_global_id(0);
     if (i >= nfaces) return;
@@ -251,22 +308,28 @@ __kernel void fill_rows(const __global float *vertices, const __global int *face
     LOAD3(vertices, faces[3 * f], x0, y0, z0);
     LOAD3(vertices, faces[3 * f + 1], x1, y1, z1);
     LOAD3(vertices, faces[3 * f + 2], x2, y2, z2);
-    const int k0 = first_row[i];
+    const int k0 = first_row[i], parts = pieces[i];
+    const float pad = pads[i];
     for (int j = 0; j < n; ++j) {
         const int k = wrap_row(k0 + j, rows);
         float lo, hi;
-        face_span(x0, y0, z0, x1, y1, z1, x2, y2, z2, t0 + ((float)k + 0.5f) * dt, &lo, &hi);
-        const int slot = offsets[k] + atomic_inc(&cursor[k]);
-        if (slot >= offsets[k + 1]) continue;
-        __global float *r = records + (size_t)REC * slot;
-        r[0] = lo;
-        r[1] = hi;
-        r[2] = planes[4 * i];
-        r[3] = planes[4 * i + 1];
-        r[4] = planes[4 * i + 2];
-        r[5] = planes[4 * i + 3];
-        r[6] = as_float(f);
-        r[7] = 0.0f;                       /* running max of s_hi, set by sort_rows */
+        band_span(x0, y0, z0, x1, y1, z1, x2, y2, z2, t0 + (float)k * dt - pad, t0 + (float)(k + 1) * dt + pad, pad_s,
+                  &lo, &hi);
+        const float width = (hi - lo) / (float)parts;
+        for (int part = 0; part < parts; ++part) {
+            const int slot = offsets[k] + atomic_inc(&cursor[k]);
+            if (slot >= offsets[k + 1]) continue;
+            __global float *r = records + (size_t)REC * slot;
+            const bool empty = lo > hi;
+            r[0] = empty ? EMPTY_LO : (part == 0 ? lo : lo + (float)part * width);
+            r[1] = empty ? EMPTY_HI : (part == parts - 1 ? hi : lo + (float)(part + 1) * width);
+            r[2] = planes[4 * i];
+            r[3] = planes[4 * i + 1];
+            r[4] = planes[4 * i + 2];
+            r[5] = planes[4 * i + 3];
+            r[6] = as_float(f);
+            r[7] = 0.0f;                   /* running max of s_hi, set by sort_rows */
+        }
     }
 }
 
@@ -536,23 +599,58 @@ __kernel void copy_pairs(const __global int *src_offsets, const __global int *np
         vstore8(vload8(cap * src_offsets[k] + j, pairs), dst_offsets[k] + j, records);
 }
 
+/* Edge function of edge (vertex i, vertex j) at p (all anchor-relative): its sign says on which side of the
+ * plane through the light and the edge p lies (point light: det(vi - L, vj - L, p - L), written as
+ * ((vi - L) x (vj - vi)) . (p - vi) so that only the first factor carries the light's distance; directional:
+ * the 2D cross product in XY). Computed from the lower vertex index and negated for the other order, so
+ * two faces sharing the edge get the same value bit for bit: a ray through a shared edge is inside both
+ * (or neither has a gap), the test is watertight. */
+INLINE float edge_function(const __global float *rel, int i, int j, float px, float py, float pz,
+                           float anc_x, float anc_y, float anc_z)
+{
+    const int a = min(i, j), b = max(i, j);
+    float ax, ay, az, bx, by, bz;
+    LOAD3(rel, a, ax, ay, az);
+    LOAD3(rel, b, bx, by, bz);
+    const float ex = bx - ax, ey = by - ay, ez = bz - az, qx = px - ax, qy = py - ay, qz = pz - az;
+#if LIGHT_POINT
+    const float lx = ax + anc_x, ly = ay + anc_y, lz = az + anc_z;
+    const float value = dot3(ly * ez - lz * ey, lz * ex - lx * ez, lx * ey - ly * ex, qx, qy, qz);
+#else
+    (void)az; (void)bz; (void)qz; (void)anc_x; (void)anc_y; (void)anc_z;
+    const float value = ex * qy - ey * qx;
+#endif
+    return i < j ? value : -value;
+}
+
 /* The face of record r blocks the segment from p to the light, further than eps from p. p (px, py, pz) and
  * the plane's offset r[5] are relative to the anchor (an, its position from the light): the height of p
  * over the plane, dq = n.p - d, is then as exact as float32 near the occluders allows, whatever the
- * light's distance; n.(p + an) is p's own offset from the light's plane parallel to it. */
-INLINE bool record_blocks(const __global float *r, float px, float py, float pz, float anc_x, float anc_y, float anc_z,
-                          float dist, float eps)
+ * light's distance; n.(p + an) is p's own offset from the light's plane parallel to it. A face record
+ * (r[6] >= 0, the face) then needs the segment to cross the triangle itself (rel, faces: anchor-relative
+ * corners): its span covers the whole row band, so its plane must not count past the face's edges. Given
+ * the plane hit, the segment's line meets the plane once, so the three edge functions of one sign (either,
+ * zero included) say the hit lies in the triangle. A loop pair's chord plane (r[6] < 0) is used as is. */
+INLINE bool record_blocks(const __global float *r, const __global float *rel, const __global int *faces,
+                          float px, float py, float pz, float anc_x, float anc_y, float anc_z, float dist, float eps)
 {
     const float dq = dot3(r[2], r[3], r[4], px, py, pz) - r[5];
 #if LIGHT_POINT
     /* light-centred: hit at t p, t = d / q in (0, 1) when q < d < 0; its distance from p is
      * (1 - t) |p| = (q - d) / q |p| > eps */
     const float q = dot3(r[2], r[3], r[4], px + anc_x, py + anc_y, pz + anc_z);
-    return dq * dist < eps * q;
+    if (!(dq * dist < eps * q)) return false;
 #else
-    (void)dist; (void)anc_x; (void)anc_y; (void)anc_z;
-    return -dq > eps * r[4];                 /* hit (d - q) / nz above p, nz > 0 */
+    (void)dist;
+    if (!(-dq > eps * r[4])) return false;                 /* hit (d - q) / nz above p, nz > 0 */
 #endif
+    const int f = as_int(r[6]);
+    if (f < 0) return true;
+    const int i0 = faces[3 * f], i1 = faces[3 * f + 1], i2 = faces[3 * f + 2];
+    const float e0 = edge_function(rel, i0, i1, px, py, pz, anc_x, anc_y, anc_z);
+    const float e1 = edge_function(rel, i1, i2, px, py, pz, anc_x, anc_y, anc_z);
+    const float e2 = edge_function(rel, i2, i0, px, py, pz, anc_x, anc_y, anc_z);
+    return (e0 >= 0.0f && e1 >= 0.0f && e2 >= 0.0f) || (e0 <= 0.0f && e1 <= 0.0f && e2 <= 0.0f);
 }
 
 /* Receiver set-up: row, key s and distance; with normals a back-facing receiver is shadowed (code 1)
@@ -588,7 +686,7 @@ INLINE int receiver_row(float *px, float *py, float *pz, float anc_x, float anc_
  * contain s). Also returns, for scan-line runs, the largest s_hi below s among the records starting at
  * or before s (prev_hi), the first s_lo after s (next_lo, the paper's nextX), and up to two records
  * containing s that do not block p (c0, c1; inside counts them all). */
-INLINE int row_lookup(const __global float *records, int begin, int end, float s, float px, float py, float pz,
+INLINE int row_lookup(const __global float *records, const __global float *rel, const __global int *faces, int begin, int end, float s, float px, float py, float pz,
                       float anc_x, float anc_y, float anc_z, float dist, float eps, float *prev_hi, float *next_lo,
                       int *c0, int *c1, int *inside)
 {
@@ -609,7 +707,7 @@ INLINE int row_lookup(const __global float *records, int begin, int end, float s
             break;
         }
         if (r[1] >= s) {
-            if (record_blocks(r, px, py, pz, anc_x, anc_y, anc_z, dist, eps)) return j;
+            if (record_blocks(r, rel, faces, px, py, pz, anc_x, anc_y, anc_z, dist, eps)) return j;
             *c1 = *inside == 1 ? j : *c1;
             *c0 = *inside == 0 ? j : *c0;
             ++*inside;
@@ -626,7 +724,7 @@ __kernel void angular_classify(const __global real_in *points, const __global re
                                const __global real_in *rot, const real_in ox, const real_in oy, const real_in oz,
                                const float anc_x, const float anc_y, const float anc_z, const float t0, const float inv_dt, const int rows, const float eps,
                                const __global int *offsets, const __global float *records,
-                               __global uchar *out)
+                               const __global float *rel, const __global int *faces, __global uchar *out)
 {
     const int i = get_global_id(0);
     if (i >= n) return;
@@ -637,17 +735,17 @@ __kernel void angular_classify(const __global real_in *points, const __global re
     if (k >= 0) {
         float prev_hi, next_lo;
         int c0, c1, inside;
-        shadow = row_lookup(records, offsets[k], offsets[k + 1], s, px, py, pz, anc_x, anc_y, anc_z, dist, eps, &prev_hi, &next_lo,
+        shadow = row_lookup(records, rel, faces, offsets[k], offsets[k + 1], s, px, py, pz, anc_x, anc_y, anc_z, dist, eps, &prev_hi, &next_lo,
                             &c0, &c1, &inside) >= 0;
     }
     out[i] = shadow;
 }
 
-INLINE bool record_hits(const __global float *records, int j, float s, float px, float py, float pz, float anc_x,
+INLINE bool record_hits(const __global float *records, const __global float *rel, const __global int *faces, int j, float s, float px, float py, float pz, float anc_x,
                         float anc_y, float anc_z, float dist, float eps)
 {
     const __global float *r = records + (size_t)REC * j;
-    return j >= 0 && r[0] <= s && s <= r[1] && record_blocks(r, px, py, pz, anc_x, anc_y, anc_z, dist, eps);
+    return j >= 0 && r[0] <= s && s <= r[1] && record_blocks(r, rel, faces, px, py, pz, anc_x, anc_y, anc_z, dist, eps);
 }
 
 /* angular_runs: one work-item per scan line of the camera image; its receivers are
@@ -663,7 +761,8 @@ __kernel void angular_runs(const __global real_in *points, const __global real_i
                            const __global real_in *rot, const real_in ox, const real_in oy, const real_in oz,
                            const float anc_x, const float anc_y, const float anc_z, const __global int *line_start, const int lines, const float t0, const float inv_dt, const int rows, const float eps,
                            const __global int *offsets, const __global float *records,
-                           __global uchar *out, __global int *lookups)
+                           const __global float *rel, const __global int *faces, __global uchar *out,
+                           __global int *lookups)
 {
     const int l = get_global_id(0);
     if (l >= lines) return;
@@ -679,7 +778,7 @@ __kernel void angular_runs(const __global real_in *points, const __global real_i
             continue;
         }
         if (k == cur_row && mode != 0 && (mode == 1 ? (s >= lo && s <= hi) : (s > lo && s < hi))) {
-            if (record_hits(records, c0, s, px, py, pz, anc_x, anc_y, anc_z, dist, eps) || record_hits(records, c1, s, px, py, pz, anc_x, anc_y, anc_z, dist, eps)) {
+            if (record_hits(records, rel, faces, c0, s, px, py, pz, anc_x, anc_y, anc_z, dist, eps) || record_hits(records, rel, faces, c1, s, px, py, pz, anc_x, anc_y, anc_z, dist, eps)) {
                 out[i] = 1;
                 continue;
             }
@@ -693,7 +792,7 @@ __kernel void angular_runs(const __global real_in *points, const __global real_i
         cur_row = k;
         float prev_hi, next_lo;
         int inside;
-        const int hit = row_lookup(records, offsets[k], offsets[k + 1], s, px, py, pz, anc_x, anc_y, anc_z, dist, eps, &prev_hi, &next_lo,
+        const int hit = row_lookup(records, rel, faces, offsets[k], offsets[k + 1], s, px, py, pz, anc_x, anc_y, anc_z, dist, eps, &prev_hi, &next_lo,
                                    &c0, &c1, &inside);
         if (hit >= 0) {
             mode = 1;

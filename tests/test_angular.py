@@ -136,21 +136,28 @@ def test_loops_non_manifold_refused(device):
 
 # 2. The table ----------------------------------------------------------------------------------------------
 
+def _ref_table(method):
+    f = method.frame
+    return ref.table(local_vertices(method), method.mesh.faces, method.table.table_faces, f.t0, f.dt, f.rows,
+                     f.full_circle, f.point, f.pad_t, f.pad_s)
+
+
 def _compare_table(method):
     f = method.frame
     got = method.entries()
-    want = ref.table(local_vertices(method), method.mesh.faces, method.table.table_faces, f.t0, f.dt, f.rows,
-                     f.full_circle, f.point)
-    # discrete part: the (face, row) pairs, identified by the plane; ties at the ends of a face's range aside
+    want = _ref_table(method)
+    # discrete part: the (face, row) pairs, identified by the plane; ties at the ends of a face's padded
+    # range (a row boundary within ROW_TIE of it) aside
     corners = local_vertices(method)[method.mesh.faces[method.table.table_faces]]
     t = ref.row_coordinate(corners, f.point)
     if f.point:
         t = t[:, :1] + (t - t[:, :1] + np.pi) % (2 * np.pi) - np.pi
-    ends = np.stack([t.min(1), t.max(1)], axis=1)
+    _, pads = ref.face_rows(corners, f.t0, f.dt, f.rows, f.full_circle, f.point, f.pad_t)
+    ends = np.stack([t.min(1) - pads, t.max(1) + pads], axis=1)
     tie_faces = set()
     for face, (lo, hi) in zip(method.table.table_faces, ends):
         for e in (lo, hi):
-            g = (e - f.t0) / f.dt - 0.5
+            g = (e - f.t0) / f.dt
             if abs(g - np.round(g)) < ref.ROW_TIE:
                 tie_faces.add(int(face))
     got_face = got["face"]
@@ -165,13 +172,20 @@ def _compare_table(method):
     for k in range(f.rows):
         lo = got["s_lo"][got["offsets"][k]:got["offsets"][k + 1]]
         assert np.all(np.diff(lo) >= 0)
-    # spans within S_TOL (reference docstring) where both cut the face
+    # a face's pieces in a row (kernels/angular.cl face_rows) tile its span: joined, the span; spans within
+    # S_TOL (reference docstring) where both cut the face
+    pieces = {}
+    for lo, hi, r, fc in zip(got["s_lo"], got["s_hi"], got["row"], got_face):
+        pieces.setdefault((int(r), int(fc)), []).append((float(lo), float(hi)))
     index = {(int(r), int(fc)): i for i, (r, fc) in enumerate(zip(want["row"], want["face"]))}
     errors = []
-    for i, (r, fc) in enumerate(zip(got["row"], got_face)):
-        j = index.get((int(r), int(fc)))
-        if j is not None and want["s_lo"][j] <= want["s_hi"][j] and got["s_lo"][i] <= got["s_hi"][i]:
-            errors.append(max(abs(got["s_lo"][i] - want["s_lo"][j]), abs(got["s_hi"][i] - want["s_hi"][j])))
+    for key, parts in pieces.items():
+        parts.sort()
+        assert all(a[1] == b[0] for a, b in zip(parts, parts[1:])) or parts[0][0] > parts[0][1], (key, parts)
+        lo, hi = parts[0][0], parts[-1][1]
+        j = index.get(key)
+        if j is not None and want["s_lo"][j] <= want["s_hi"][j] and lo <= hi:
+            errors.append(max(abs(lo - want["s_lo"][j]), abs(hi - want["s_hi"][j])))
     assert len(errors) > 0.9 * len(got_set)
     assert max(errors) < ref.S_TOL, max(errors)
     return got, want
@@ -199,34 +213,41 @@ def test_table_random_soup(device, rng):
         _compare_lookups(method, pts, None)
 
 
-def test_table_light_inside_full_circle(device):
+@pytest.mark.parametrize("rows", [16, 90])
+def test_table_light_inside_full_circle(device, rng, rows):
+    """A light inside the scene: rows wrap round at +-pi (faces across the cut), pillars round the pole axis
+    (faces in every row, spans reaching s = +-1); table and lookups against the reference."""
     scene = sc.Scene.load(SCENES / "hard" / "light_inside.toml")
-    method = angular.AngularMethod(device, theta_resolution=90)
+    method = angular.AngularMethod(device, theta_resolution=rows)
     method.prepare(scene.mesh, scene.lights[0], scene.bounds, EPS)
     assert method.frame.full_circle
-    _compare_table(method)
+    got, _ = _compare_table(method)
+    rows_of_face = np.bincount(np.unique(np.c_[got["face"], got["row"]], axis=0)[:, 0])
+    assert rows_of_face.max() == rows                              # some face is in every row (round the pole)
+    assert np.any(np.maximum(got["s_hi"], -got["s_lo"]) > 1 - 1e-3)  # a span reaching the pole (s = +-1)
+    lo, hi = scene.bounds
+    _compare_lookups(method, rng.uniform(lo, hi, (1500, 3)), None)
 
 
 # 3. Lookups ------------------------------------------------------------------------------------------------
 
 def _compare_lookups(method, points, normals):
     """Kernel lookups against the reference lookups on the same frame; receivers whose decision is a
-    float32 tie (s within S_TOL of a span end, or the hit within 1e-4 relative of eps) are left out."""
+    float32 tie are left out: the answer changes when the faces' edges move by 1e-5 of their size (the
+    device's float32 edge functions; reference docstring) or the hit's distance from the receiver moves
+    by 1e-4 of eps. A receiver's row and s are no ties: spans and rows are padded past float32's error
+    (a receiver on a row boundary meets the same faces in both rows)."""
     f = method.frame
     got = method.classify(points, normals)
     lp = f.to_local(points)
     ln = None if normals is None else normals @ f.rotation.T
-    tab = ref.table(local_vertices(method), method.mesh.faces, method.table.table_faces, f.t0, f.dt, f.rows,
-                    f.full_circle, f.point)
-    want = ref.classify(lp, ln, tab, f.t0, f.dt, f.rows, f.full_circle, f.point, method.eps)
-    k, s, _ = ref.receiver_keys(lp, f.t0, f.dt, f.rows, f.full_circle, f.point)
-    g = (ref.row_coordinate(lp, f.point) - f.t0) / f.dt
-    tie = np.abs(g - np.round(g)) < ref.ROW_TIE
-    for i in range(len(lp)):
-        sel = tab["row"] == k[i]
-        ends = np.r_[tab["s_lo"][sel], tab["s_hi"][sel]]
-        if len(ends) and np.min(np.abs(ends - s[i])) < 10 * ref.S_TOL:
-            tie[i] = True
+    tab = _ref_table(method)
+
+    def run(grow=0.0, eps=method.eps):
+        return ref.classify(lp, ln, tab, f.t0, f.dt, f.rows, f.full_circle, f.point, eps, grow)
+
+    want = run()
+    tie = (run(grow=1e-5) != run(grow=-1e-5)) | (run(eps=method.eps * (1 + 1e-4)) != run(eps=method.eps * (1 - 1e-4)))
     differ = np.flatnonzero((got != want) & ~tie)
     assert len(differ) == 0, f"angular_classify: {len(differ)} of {len(lp)} differ, first {differ[:5]}"
     assert (~tie).sum() > 0.8 * len(lp)
@@ -278,8 +299,10 @@ def test_runs_count_lookups(device, rng):
 
 @pytest.mark.parametrize("table", angular.TABLES)
 def test_cube_over_plane_error_bound(device, rng, table):
-    """Ground receivers may differ from exact only if the exact answer changes within half a row (in theta)
-    of their direction: the spans come from the row's centre (both tables)."""
+    """Ground receivers against exact. faces: a face's span covers the whole row band and the hit must lie
+    in the triangle, so only float32 ties may differ (measured: 0 of 20 000 at 60 and 240 rows). loops: a
+    receiver may differ only if the exact answer changes within half a row (in theta) of its direction,
+    as the pairs are cut at the row's centre."""
     mesh, cube = cube_over_plane(), _mesh(_box((1, 1, 1), (0, 1.5, 0)))
     light = sc.PointLight((0.3, 5, 0.2))
     pts = ground_points(rng, 20000)
@@ -290,6 +313,9 @@ def test_cube_over_plane_error_bound(device, rng, table):
         got = method.classify(pts)
         differ = np.flatnonzero(got != exact)
         errors.append(len(differ))
+        if table == "faces":
+            assert len(differ) <= 2, (rows, len(differ))
+            continue
         # rotate each differing receiver about the frame's X axis (through the light) by up to half a row
         local = method.frame.to_local(pts[differ])
         changes = np.zeros(len(differ), dtype=bool)
@@ -302,8 +328,9 @@ def test_cube_over_plane_error_bound(device, rng, table):
             # the cube alone: a rotated receiver can dip under the plane, which must not count as shadow
             changes |= sc.shadow_mask(cube, light, world, method="exact", eps=EPS) != exact[differ]
         assert changes.all(), f"{(~changes).sum()} receivers differ with no shadow edge within half a row"
-    assert errors[1] < errors[0]
-    assert errors[1] < 0.005 * len(pts)
+    if table == "loops":
+        assert errors[1] < errors[0]
+        assert errors[1] < 0.005 * len(pts)
 
 
 HARD = sorted((SCENES / "hard").glob("*.toml"))
@@ -311,8 +338,10 @@ HARD = sorted((SCENES / "hard").glob("*.toml"))
 
 @pytest.mark.parametrize("path", HARD, ids=[p.stem for p in HARD])
 def test_hard_cases(device, path):
-    """Every hard scene, both tables: the error against exact at the default resolution (the image's own
-    limit) stays under 3 % of the covered pixels (the discretization band), and 360 rows are no worse than 90."""
+    """Every hard scene, both tables. faces: at most 2 pixels differ from exact at any rows (float32 ties;
+    bench/results/angular.md measured 0 on every hard scene at 960 x 540). loops: the error at the default
+    resolution (the image's own limit) stays under 3 % of the covered pixels (the discretization band), and
+    360 rows are no worse than 90."""
     scene = sc.Scene.load(path)
     exact = render_report(scene, "exact", width=160, height=90).shadow
     for table in angular.TABLES:
@@ -320,7 +349,10 @@ def test_hard_cases(device, path):
         for rows in (None, 90, 360):
             result = render_report(scene, "angular", width=160, height=90, theta_resolution=rows, table=table)
             wrong[rows] = np.count_nonzero(result.shadow != exact)
-        # 3 %: the 256-segment sphere's terminator (faces: 2.3 %, a grazing self-shadow band half a row wide)
+        if table == "faces":
+            assert max(wrong.values()) <= 2, wrong
+            continue
+        # 3 %: the 256-segment sphere's terminator (a grazing self-shadow band half a row wide)
         assert wrong[None] <= 0.03 * exact.size, (table, wrong)
         assert wrong[360] <= wrong[90] + 0.002 * exact.size, (table, wrong)
 
@@ -328,8 +360,9 @@ def test_hard_cases(device, path):
 @pytest.mark.parametrize("table", angular.TABLES)
 def test_coiled_pairing(device, table):
     """Figure 4: a coiled loop. The paper's pairing of the loop's crossings (reference) covers the doubly
-    wound sector that even-odd pairing would leave as a hole, and the device table's spans cover the same
-    (faces: the lit faces' spans; loops: the device's own section-4 pairs)."""
+    wound sector that even-odd pairing would leave as a hole, and the device table's spans cover it: loops,
+    the device's own section-4 pairs, the same; faces, the lit faces' spans over the whole row band, at
+    least that (they also hold the directions off the row's centre)."""
     mesh = coil()
     light = sc.DirectionalLight((0, -1, 0))
     pts = ground_points(np.random.default_rng(4), 4000, half=2.0, y=-0.5)
@@ -346,11 +379,50 @@ def test_coiled_pairing(device, table):
         far = np.min(np.abs(s[:, None] - ends[None, :]), axis=1) > 1e-3 if len(ends) else np.ones(len(s), bool)
         sel = slice(got["offsets"][k], got["offsets"][k + 1])
         spans = list(zip(got["s_lo"][sel], got["s_hi"][sel]))
-        assert np.array_equal(ref.covered(spans, s)[far], ref.covered(paper, s)[far]), f"row {k}"
+        if table == "loops":
+            assert np.array_equal(ref.covered(spans, s)[far], ref.covered(paper, s)[far]), f"row {k}"
+        else:
+            assert np.all(ref.covered(spans, s)[far] >= ref.covered(paper, s)[far]), f"row {k}"
         holes += np.count_nonzero(ref.covered(paper, s)[far] & ~ref.covered(naive, s)[far])
     assert holes > 0, "the coil is there: even-odd pairing would open holes"
     exact = sc.shadow_mask(mesh, light, pts, method="exact", eps=EPS)
     assert np.mean(method.classify(pts) != exact) < 0.03
+
+
+def _over_ground(shape):
+    """(shape resting 0.2 above a 10 x 10 ground quad, the two as one mesh)."""
+    shape = shape.copy()
+    shape.apply_translation([0.0, 1.2 - shape.bounds[0, 1], 0.0])
+    n = len(shape.vertices)
+    ground = np.array([[-5, 0, -5], [5, 0, -5], [5, 0, 5], [-5, 0, 5]], dtype=float)
+    return shape, sc.Mesh(np.r_[shape.vertices, ground], np.r_[shape.faces, [[n, n + 2, n + 1], [n, n + 3, n + 2]]])
+
+
+@pytest.mark.parametrize("shape", ["sphere", "torus"])
+def test_lit_caps_and_ground(device, shape):
+    """Receivers ON a closed occluder's lit side (face normals, directional light) are not shadowed by a
+    neighbouring face's plane (the faces table used to cut faces at the row's centre and extend their
+    planes past their edges: 15-22 % false shadows on such caps, bench/results/angular_caps.md), and the
+    ground under it loses no shadow (spans cover the whole row band: no face is missed). Measured on 3000
+    + 3000 receivers per shape and light (three lights, these two shapes): 0 false shadows and 0 false
+    lights on both sets; the bound of 2 per 1500 leaves room for float32 ties (a receiver within ~1e-6 of
+    a face's edge or of the eps offset), far below the old 12 %."""
+    from shadowcl.reference.exact import shadow_mask as truth
+
+    made = {"sphere": lambda: trimesh.creation.icosphere(subdivisions=3),
+            "torus": lambda: trimesh.creation.torus(major_radius=0.8, minor_radius=0.35, major_sections=48,
+                                                    minor_sections=24)}
+    solid, mesh = _over_ground(made[shape]())
+    on, face = trimesh.sample.sample_surface(solid, 1500, seed=7)
+    rng = np.random.default_rng(7)
+    ground = np.c_[rng.uniform(-2.5, 2.5, 1500), np.zeros(1500), rng.uniform(-2.5, 2.5, 1500)]
+    for light in (sc.DirectionalLight((0.3, -1, 0.2)), sc.DirectionalLight((-0.7, -0.5, 0.4))):
+        for points, normals in ((on, solid.face_normals[face]), (ground, np.tile([0.0, 1.0, 0.0], (1500, 1)))):
+            got = sc.shadow_mask(mesh, light, points, normals, method="angular", device=device)
+            want = truth(mesh.vertices, mesh.faces, light, points, normals)
+            assert 0.03 * len(points) < want.sum() < 0.97 * len(points)     # both answers are exercised
+            assert np.count_nonzero(got & ~want) <= 2, (shape, light.direction, "false shadows")
+            assert np.count_nonzero(~got & want) <= 2, (shape, light.direction, "false lights")
 
 
 def test_shadow_counts_two_lights(device, rng):
@@ -509,10 +581,10 @@ def test_loops_masks(device, rng):
             for rows in (100, 400):
                 got = prepared(device, mesh, light, pts, theta_resolution=rows, table=table).classify(pts)
                 wrong[table, rows] = np.count_nonzero(got != exact)
-        # the faces table keeps to the half-row band (test_cube_over_plane_error_bound); on the ground both
-        # tables see the same shadow outline at the rows' centres, so the loop table may not do worse
+        # the faces table is exact but for float32 ties (test_cube_over_plane_error_bound); the loop table's
+        # pairs are cut at the rows' centres: its error is the half-row band
         for rows in (100, 400):
-            assert wrong["loops", rows] <= wrong["faces", rows] + 5, wrong
+            assert wrong["faces", rows] <= min(wrong["loops", rows], 2), wrong
         assert wrong["loops", 400] < wrong["loops", 100] < 0.01 * len(pts), wrong
     # the hole: ground points seen through it from the light are lit
     hole = pts[np.hypot(pts[:, 0] - 0.1, pts[:, 2] - 0.07) < 0.6]
@@ -606,6 +678,6 @@ def test_fills_never_write_past_their_rows(device, monkeypatch, table, kernel):
     writing out of bounds or returning a short table."""
     counts = angular.row_counts
     monkeypatch.setattr(angular, "row_counts", lambda *args: counts(*args) // 4)
-    with pytest.raises(RuntimeError, match=f"angular {kernel}: .* rows got more records than counted"):
+    with pytest.raises(RuntimeError, match=f"angular {kernel} met .* entries more than its count made room for"):
         prepared(device, torus_over_plane(), sc.PointLight((0.3, 3.0, 0.2)), ground_points(np.random.default_rng(2), 10),
                  theta_resolution=64, table=table)

@@ -18,11 +18,13 @@ LIGHT = sc.PointLight((0, 0, 5))
 BAD_INPUTS = [
     (lambda: sc.Mesh([[0, 0, np.nan], [1, 0, 0], [0, 1, 0]], FACE), ValueError, r"vertices: contains NaN or inf"),
     (lambda: sc.Mesh([[0, 0, np.inf], [1, 0, 0], [0, 1, 0]], FACE), ValueError, r"vertices: contains NaN or inf"),
-    (lambda: sc.Mesh(TRIANGLE, [[0, 1, 3]]), ValueError, r"faces: vertex index 3 out of range for 3 vertices"),
-    (lambda: sc.Mesh(TRIANGLE, [[0, -1, 2]]), ValueError, r"faces: negative vertex index -1"),
+    (lambda: sc.Mesh(TRIANGLE, [[0, 1, 3]]), ValueError, r"faces: face 0 has vertex index 3 out of range for 3 vertices"),
+    (lambda: sc.Mesh(TRIANGLE, [[0, -1, 2]]), ValueError, r"faces: face 0 has vertex index -1 out of range for 3 vertices"),
+    (lambda: sc.Mesh(TRIANGLE, [[0, 1, 2], [2, 7, -4]]), ValueError,      # the first bad index, not the extreme
+     r"faces: face 1 has vertex index 7 out of range for 3 vertices"),
     (lambda: sc.Mesh(TRIANGLE[:, :2], FACE), ValueError, r"vertices: expected shape \(N, 3\), got \(3, 2\)"),
     (lambda: sc.Mesh(TRIANGLE, [0, 1, 2]), ValueError, r"faces: expected shape \(F, 3\), got \(3,\)"),
-    (lambda: sc.Mesh(TRIANGLE, FACE.astype(float)), TypeError, r"faces: expected integer vertex indices"),
+    (lambda: sc.Mesh(TRIANGLE, FACE.astype(float)), TypeError, r"faces: expected integer indices, got dtype float64"),
     (lambda: sc.Mesh(TRIANGLE.astype(str), FACE), TypeError, r"vertices: expected a numeric array"),
     (lambda: sc.Mesh(np.zeros((0, 3)), np.zeros((0, 3), dtype=int)), ValueError, r"faces: the mesh is empty"),
     (lambda: sc.Mesh([[1e39, 0, 0], [1, 0, 0], [0, 1, 0]], FACE), ValueError, r"vertices: coordinates overflow float32"),
@@ -118,7 +120,7 @@ def test_load_other_formats(tmp_path):
 # ---- mesh files: read by shadowcl.meshio, every malformed file named with its line ----
 
 BAD_FILES = [
-    ("bad.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n", r"line 4: face 0 refers to vertex 7, but the file has 3 vertices"),
+    ("bad.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n", r"line 4: faces: face 0 has vertex index 7 out of range for 3 vertices \(numbered from 1\)"),
     ("bad.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n", r"line 4: vertex index 0 is not valid here"),
     ("bad.obj", b"v 0 0 0\nv a b c\nv 0 1 0\nf 1 2 3\n", r"line 2: expected three numbers after 'v', got 'a b c'"),
     ("bad.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 -4 2\n", r"line 4: vertex index -4 is not valid here"),
@@ -130,7 +132,7 @@ BAD_FILES = [
     ("bad.ply", bytes(range(256)) * 4, r"not a PLY file"),
     ("bad.ply", b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
                 b"element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 5\n",
-     r"line 13: face 0 refers to vertex 5, but the file has 3 vertices"),
+     r"line 13: faces: face 0 has vertex index 5 out of range for 3 vertices"),
     ("bad.ply", b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
                 b"element face 0\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n", r"no faces"),
     ("bad.ply", b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"

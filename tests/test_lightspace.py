@@ -196,7 +196,8 @@ def test_linked_lists_equal_csr_lists(device, rng):
     assert np.array_equal(dense(device, grid, csr, len(corners)), dense(device, grid2, linked, len(corners)))
 
 
-@pytest.mark.parametrize("n", [1, 2, 1023, 1024, 1025, 4096, 524289, 700001])
+# sizes straddling the scan's boundaries: one block (1024), SCAN_BLOCKS (512) blocks of 1024, then longer blocks
+@pytest.mark.parametrize("n", [0, 1, 2, 1023, 1024, 1025, 4096, 524287, 524288, 524289, 700001, 2**20 + 3])
 def test_prefix_sum_matches_numpy(device, rng, n):
     counts = rng.integers(0, 50, n).astype(np.int32)
     views = ls.fit_views(sc.DirectionalLight((0, -1, 0)), BOUNDS, np.zeros(3), 1.0)

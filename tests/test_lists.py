@@ -3,11 +3,15 @@
 Driven through the two kernels that use it (voxel.cl sort_lists: int items by a key table; angular.cl
 sort_rows: 8-float records by s_lo, then the running maximum of s_hi) on random segments whose lengths
 straddle the insertion/heapsort switch (SC_SORT_SHORT = 16) and on the hard cases: empty and single
-segments, ties, all-equal keys, sorted and reversed input.
+segments, ties, all-equal keys, sorted and reversed input. Also lists.check_filled, the fills' one
+overflow check. (The prefix sum is tested with the light-space lists that use it: test_lightspace.)
 """
 
 import numpy as np
 import pyopencl as cl
+import pytest
+
+from shadowcl.lists import check_filled
 
 SHORT = 16   # SC_SORT_SHORT in kernels/lists.h
 
@@ -61,3 +65,32 @@ def test_angular_sort_rows_orders_each_row_by_s_lo(device, rng):
         np.testing.assert_array_equal(np.sort(faces), np.arange(a, b))
         np.testing.assert_array_equal(row[:, :7], records[faces, :7])             # records moved whole
         np.testing.assert_array_equal(row[:, 7], np.maximum.accumulate(np.maximum(row[:, 1], -2.0)))
+
+
+def test_check_filled_raises_on_a_dropped_count(device):
+    """lists.check_filled, the one overflow check of fills (lightspace's CSR fill and exact's binning
+    drive it through their kernels with tiny capacities in test_lightspace / test_exact): a counter of
+    dropped entries, zero passes, any other count raises with the count and the fill's name."""
+    check_filled(device, device.to_device(np.zeros(1, np.int32)), "a fill")
+    with pytest.raises(RuntimeError, match=r"^a fill met 3 entries more than its count made room for; "):
+        check_filled(device, device.to_device(np.array([3], np.int32)), "a fill")
+
+
+@pytest.mark.parametrize("n", [0, 1, 17])
+def test_check_filled_compares_cursors_with_their_segments(device, n):
+    """The cursor form: per-segment cursors within their slots pass (full, short or empty segments); one
+    past raises naming the first such segment, its cursor and its slots, and the total excess."""
+    rng = np.random.default_rng(n)
+    offsets = np.concatenate([[0], np.cumsum(rng.integers(0, 4, n))])
+    slots = np.diff(offsets).astype(np.int32)
+    check_filled(device, device.to_device(np.maximum(slots - 1, 0)), "rows", offsets)
+    check_filled(device, device.to_device(slots), "rows", offsets)
+    if n == 0:
+        return
+    taken = slots.copy()
+    taken[n // 2] += 2
+    taken[-1] += 1
+    first = n // 2                       # n = 1: both additions fall on segment 0
+    with pytest.raises(RuntimeError, match=rf"^rows met 3 entries more than its count made room for \(first in "
+                                          rf"segment {first}: {taken[first]} entries for {slots[first]} slots\)"):
+        check_filled(device, device.to_device(taken), "rows", offsets)

@@ -343,7 +343,7 @@ BAD_FILES = [
     (OBJECT + "intersection = [{ box = {} }, { box = {}, translate = [5, 0, 0] }]\n", ValueError,
      r"objects\[0\]: the shape is empty"),
     (OBJECT + "triangles = { vertices = [[0, 0, 0]], faces = [[0, 1, 2]] }\n", ValueError,
-     r"objects\[0\]\.triangles: faces: vertex index 2 out of range for 1 vertices"),
+     r"objects\[0\]\.triangles: faces: face 0 has vertex index 1 out of range for 1 vertices"),
     (OBJECT + "triangles = { faces = [[0, 1, 2]] }\n", ValueError, r"objects\[0\]\.triangles\.vertices: missing"),
     ("objects = 3\n" + LIGHT, TypeError, r"objects: expected an array of tables, got an integer"),
     (LIGHT, ValueError, r"objects: a scene needs at least one object"),

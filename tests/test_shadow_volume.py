@@ -478,6 +478,7 @@ BAD_INPUTS = [
     (lambda d: create_method("shadow_volume", d, lod="coarse"), TypeError, r"lod: expected None, a level index"),
     (lambda d: create_method("shadow_volume", d, lod=1.5), TypeError, r"lod: expected None, a level index"),
     (lambda d: create_method("shadow_volume", d, max_error=-1), ValueError, r"max_error"),
+    (lambda d: create_method("shadow_volume", d, expected_receivers=0), ValueError, r"expected_receivers"),
     (lambda d: create_method("shadow_volume", d, colour=1), TypeError, r"colour: not a parameter"),
     (lambda d: create_method("shadow_volume", d).prepare("mesh", LIGHTS["point"], BOX, 0.0), TypeError, r"mesh:"),
     (lambda d: create_method("shadow_volume", d).prepare(MESH, "light", BOX, 0.0), TypeError, r"light"),
@@ -507,4 +508,22 @@ def test_bad_input_is_named(device, call, error, message):
 
 
 def test_listed_in_methods():
-    assert set(sc.methods()["shadow_volume"]) == {"lod", "silhouettes", "max_error", "receivers", "stencil", "eps"}
+    assert set(sc.methods()["shadow_volume"]) == {"lod", "silhouettes", "max_error", "receivers", "stencil",
+                                                  "expected_receivers", "eps"}
+
+
+def test_cap_lists_are_sized_by_expected_receivers(device, rng):
+    """method="auto" queries a small sample first: the cap lists' grid follows expected_receivers, not the
+    first query's count, and the answers are exact's either way."""
+    mesh = icosphere(3)
+    light, box = LIGHTS["point"], np.array([[-2.0, -2.0, -2.0], [2.0, 2.0, 2.0]])
+    points = np.c_[rng.uniform(-2, 2, 10), np.full(10, -1.5), rng.uniform(-2, 2, 10)]     # below the ball
+    exact = create_method("exact", device)
+    exact.prepare(mesh, light, box, 1e-4)
+    grids = {}
+    for expected in (None, 2_000_000):
+        method = create_method("shadow_volume", device, expected_receivers=expected)
+        method.prepare(mesh, light, box, 1e-4)
+        np.testing.assert_array_equal(method.classify(points), exact.classify(points))
+        grids[expected] = method._exact.resolved_params()["resolution"]
+    assert grids[2_000_000] > grids[None]

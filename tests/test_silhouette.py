@@ -333,9 +333,8 @@ def test_brute_tracker_is_silhouette_edges(device, rng):
         assert np.array_equal(tracker.update(light).codes, silhouette_edges(device, mesh, light).codes)
 
 
-@pytest.mark.parametrize("method, params", [("tracking", {"walks": "device"}), ("tracking", {"walks": "host"}),
-                                            ("random", {"fraction": 0.1})],
-                         ids=["tracking-device", "tracking-host", "random"])
+@pytest.mark.parametrize("method, params", [("tracking", {}), ("random", {"fraction": 0.1})],
+                         ids=["tracking", "random"])
 def test_icosphere_small_moves_find_every_edge(device, method, params):
     # Convex: one loop; 2 degrees a frame. The random method's first frame needs one sampled edge on the
     # loop (~70 of 1920 edges; 192 samples miss it with probability ~1e-3; seed 0 does not).
@@ -345,7 +344,7 @@ def test_icosphere_small_moves_find_every_edge(device, method, params):
         recalls, precisions, stats = follow(device, mesh, lights, method=method, **params)
         assert np.all(recalls == 1.0) and np.all(precisions == 1.0)
         assert not any(s["fallback"] for s in stats)
-        if params.get("walks") != "device":                       # the device's walks do not count faces
+        if method == "random":                                    # the device's walks do not count faces
             assert all(s["faces_tested"] < len(mesh.faces) for s in stats[1:]), "a coherent frame tests few faces"
 
 
@@ -389,32 +388,28 @@ def test_large_jump_falls_back_to_brute_force(device):
     assert stats[0]["faces_tested"] == len(mesh.faces)             # the first frame is brute force
 
 
-@pytest.mark.parametrize("walks", ["device", "host"])
-def test_tracking_from_an_empty_silhouette_falls_back(device, walks):
+def test_tracking_from_an_empty_silhouette_falls_back(device):
     # A light inside a closed sphere lights no face: no silhouette to track from. Moved outside, the
     # silhouette must still be found (it was silently empty, recall 0, before the fallback).
     mesh = icosphere(3)
     lights = [sc.PointLight((0.0, 0.0, 0.0)), sc.PointLight((0.1, 0.0, 0.0)), sc.PointLight((3.0, 0.2, 0.0)),
               sc.PointLight((3.0, 0.3, 0.0))]
-    recalls, precisions, stats = follow(device, mesh, lights, method="tracking", walks=walks)
+    recalls, precisions, stats = follow(device, mesh, lights, method="tracking")
     assert np.all(recalls == 1.0) and np.all(precisions == 1.0)
     assert [s["fallback"] for s in stats] == [False, True, True, False]     # tracked again once it has edges
 
 
-@pytest.mark.parametrize("walks", ["device", "host"])
-def test_walks_find_a_silhouette_that_moved_away(device, walks):
+def test_walks_find_a_silhouette_that_moved_away(device):
     # A light 1.5 radii from a sphere lights a cap of 48 degrees; moved by 120 degrees, the new cap and
     # the old one do not meet, so every seed must come from a III.B walk (stale share 1).
     mesh = icosphere(3)
     angle = np.radians(120.0)
     lights = [sc.PointLight((1.5, 0.0, 0.0)), sc.PointLight((1.5 * np.cos(angle), 0.2, 1.5 * np.sin(angle)))]
-    recalls, precisions, stats = follow(device, mesh, lights, method="tracking", max_stale=1.0, max_walk=64,
-                                        walks=walks)
+    recalls, precisions, stats = follow(device, mesh, lights, method="tracking", max_stale=1.0, max_walk=64)
     assert np.all(recalls == 1.0) and np.all(precisions == 1.0)
     assert stats[1]["stale"] == 1.0 and not stats[1]["fallback"]
     # Walks of one step cannot get there: lost, and the tracker falls back instead of losing the loop.
-    recalls, _, stats = follow(device, mesh, lights, method="tracking", max_stale=1.0, max_walk=1, max_lost=0.5,
-                               walks=walks)
+    recalls, _, stats = follow(device, mesh, lights, method="tracking", max_stale=1.0, max_walk=1, max_lost=0.5)
     assert stats[1]["fallback"] and stats[1]["lost_walks"] > 0.5 * stats[0]["edges_found"]   # a walk per old edge
     assert np.all(recalls == 1.0)
 
@@ -453,9 +448,8 @@ def test_nonmanifold_and_misoriented_meshes(device):
     faces = CUBE_FACES.copy()
     faces[0] = faces[0][::-1]
     cube = sc.Mesh(CUBE_VERTICES, faces)
-    for walks in ("host", "device"):
-        with pytest.raises(ValueError, match="wound the same way"):       # the III.C walk needs the winding
-            SilhouetteTracker(device, cube, method="tracking", walks=walks)
+    with pytest.raises(ValueError, match="wound the same way"):           # the III.C walk needs the winding
+        SilhouetteTracker(device, cube, method="tracking")
     lights = [sc.PointLight((3.0, 2.0 + 0.1 * i, 1.5)) for i in range(5)]
     recalls, precisions, _ = follow(device, cube, lights, method="random", fraction=1.0)   # growth is unoriented
     assert np.all(recalls == 1.0) and np.all(precisions == 1.0)
@@ -473,30 +467,47 @@ def test_reset_forgets_the_history(device):
             assert tracker.stats["faces_tested"] == len(mesh.faces)     # a first frame again: brute force
 
 
-@pytest.mark.parametrize("name, degrees", [("stanford-bunny", 3.0), ("teapot", 15.0)])
-def test_device_walks_are_the_host_walks(device, name, degrees):
-    # kernels track_seeds and complete_loops against the NumPy walks: the same seeds, walks and loops,
-    # so the same edges, stale share and lost walks, frame by frame (the teapot is open).
+@pytest.mark.parametrize("name, degrees, max_walk", [("stanford-bunny", 3.0, 16), ("teapot", 15.0, 16),
+                                                     ("stanford-bunny", 15.0, 1)])
+def test_device_walks_are_the_reference_walks(device, name, degrees, max_walk):
+    # kernels track_previous, seed_edges and complete_loops against the NumPy walks from the same last
+    # frame and the kernel's facing: the same edges, stale share, lost walks and fallbacks, frame by frame
+    # (the teapot is open; one-step walks on a fast path get lost).
     mesh = model(name)
-    trackers = [SilhouetteTracker(device, mesh, method="tracking", walks=walks) for walks in ("device", "host")]
+    tracker = SilhouetteTracker(device, mesh, method="tracking", max_walk=max_walk)
+    h = tracker.halves
+    extra = np.r_[tracker.adjacency.border_edges, tracker.concave_edges]
+    fallbacks = stale = 0
     for light in circling_lights(mesh, 6, degrees):
-        on_device, on_host = (tracker.update(light) for tracker in trackers)
-        assert np.array_equal(on_device.codes, on_host.codes)
-        for key in ("stale", "lost_walks", "fallback"):
-            assert trackers[0].stats.get(key) == trackers[1].stats.get(key), key
-    assert trackers[0].stats["stale"] > 0 and not trackers[0].stats["fallback"]
+        previous = tracker._previous
+        codes = tracker.update(light).codes
+        if previous is None:                                        # the first frame: brute force
+            continue
+        lit_faces = np.r_[silhouette_edges(device, mesh, light).facing, False]      # face -1: missing
+        found, stats = ref.tracking_frame(h.twin, h.edge, h.tails, h.heads, h.edge_halves, previous, extra,
+                                          lambda faces: lit_faces[faces], max_walk, tracker.max_stale,
+                                          tracker.max_lost)
+        assert (found is None) == tracker.stats["fallback"]
+        for key in stats:
+            assert stats[key] == pytest.approx(tracker.stats[key]), key
+        if found is not None:
+            want = np.zeros_like(codes)
+            want[h.edge[found]] = np.where(h.tails[found] < h.heads[found], 1, -1)
+            assert np.array_equal(codes, want)
+        fallbacks += tracker.stats["fallback"]
+        stale += stats["stale"] > 0
+    assert stale > 0 and (fallbacks > 0) == (max_walk == 1)
 
 
 def test_device_batches_and_host_tests_agree(device):
     # The same frames with every face test on the host and with large batches on the device.
     mesh = model("stanford-bunny")
     lights = circling_lights(mesh, 4, 3.0)
-    for method in ("tracking", "random"):
-        host = SilhouetteTracker(device, mesh, method=method, device_batch=10**9, walks="host")
-        batched = SilhouetteTracker(device, mesh, method=method, device_batch=1, walks="host")
-        for light in lights:
-            assert np.array_equal(host.update(light).codes, batched.update(light).codes)
-        assert host.stats["faces_tested"] < len(mesh.faces) == batched.stats["faces_tested"]
+    host = SilhouetteTracker(device, mesh, method="random", device_batch=10**9)
+    batched = SilhouetteTracker(device, mesh, method="random", device_batch=1)
+    for light in lights:
+        assert np.array_equal(host.update(light).codes, batched.update(light).codes)
+    assert host.stats["faces_tested"] < len(mesh.faces) == batched.stats["faces_tested"]
 
 
 @pytest.mark.parametrize("kwargs, error, match", [
@@ -509,7 +520,6 @@ def test_device_batches_and_host_tests_agree(device):
     ({"max_stale": 2.0}, ValueError, "max_stale: must be at most 1"),
     ({"max_lost": 0.0}, ValueError, "max_lost: must be a finite positive"),
     ({"concave_angle": -1.0}, ValueError, "concave_angle: must be a finite non-negative"),
-    ({"walks": "gpu"}, ValueError, "walks: expected 'device' or 'host'"),
 ])
 def test_tracker_bad_input(device, kwargs, error, match):
     with pytest.raises(error, match=match):

@@ -1,5 +1,7 @@
 """kernels/voxelize.cl against its NumPy reference, and the voxelization's invariants (no leaks, accuracy)."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from scipy import ndimage
@@ -11,7 +13,7 @@ from shadowcl.reference import voxelize as ref
 from shadowcl.subdivision import SubdivisionSurface
 from shadowcl.testing import grid_patch_table
 
-from conftest import require_models
+from conftest import SCENES, require_models
 
 
 def torus_net(m=12, n=8, major=1.0, minor=0.4, tilt=0.3, shift=0.0123):
@@ -269,8 +271,8 @@ def test_grid_bounds_need_only_hold_the_control_vertices(device, rng):
     (lambda d, t: vz.voxelize(d, t, 16, connectivity=8), ValueError, "connectivity"),
     (lambda d, t: vz.voxelize(d, t, 16, connectivity=26.0), ValueError, "connectivity: expected one of 6, 18, 26, got 26.0"),
     (lambda d, t: vz.voxelize(d, "torus", 16), TypeError, "surface"),
-    (lambda d, t: vz.voxelize(d, vz.Patches(t.points * np.nan, t.first, t.levels, t.neighbors), 16), ValueError, "finite"),
-    (lambda d, t: vz.voxelize(d, vz.Patches(t.points[:10], t.first, t.levels, t.neighbors), 16), ValueError, "beyond"),
+    (lambda d, t: vz.voxelize(d, replace(t, points=t.points * np.nan), 16), ValueError, "finite"),
+    (lambda d, t: vz.voxelize(d, replace(t, points=t.points[:10]), 16), ValueError, "beyond"),
     (lambda d, t: grid_patch_table(np.zeros((3, 5, 3))), ValueError, "net"),
 ])
 def test_bad_input(device, call, error, match):
@@ -331,6 +333,48 @@ def test_leaf_mesh_is_crack_free(device, shape, euler, resolution):
     # without crack elimination (two triangles per leaf, corners welded) edges are left with one face
     naive = Mesh(corners, (4 * np.arange(vox.nleaves)[:, None, None] + np.array([[0, 1, 2], [0, 2, 3]])).reshape(-1, 3))
     assert not closed_and_oriented(oriented_edges(naive)[0])
+
+
+def sides_by_geometry(vox):
+    """Every pair of patch sides that are one curve, searched among all sides by a KD-tree (no table
+    neighbours): (a, b, start, span) as vz.matching_sides returns them."""
+    count = (1 << vz.SIDE_LOG) + 1
+    points = vz.side_samples(vox)
+    tol = vz.SIDE_MATCH * vox.voxel_size
+    tree = cKDTree(points.reshape(-1, 3))
+    ends = []
+    for j in (0, count - 1):                       # (side a, side b, nearest sample of b) at a's start, end
+        hits = cKDTree(points[:, j]).sparse_distance_matrix(tree, tol, output_type="ndarray")
+        hit = np.stack([hits["i"], hits["j"] // count, hits["j"] % count], axis=1).astype(np.int64)
+        hit = hit[np.lexsort((hits["v"], hit[:, 1], hit[:, 0]))]
+        first = np.ones(len(hit), bool)
+        first[1:] = np.any(hit[1:, :2] != hit[:-1, :2], axis=1)
+        ends.append({(a, b): j for a, b, j in hit[first]})
+    pairs = []
+    for (a, b), j0 in ends[0].items():
+        j1 = ends[1].get((a, b))
+        span = None if j1 is None else j1 - j0
+        if a == b or not span or abs(span) & (abs(span) - 1):
+            continue
+        steps = [(i, j0 * (count - 1) + i * span) for i in range(count)]      # b's t in 2^-2 SIDE_LOG units
+        on = [(i, t // (count - 1)) for i, t in steps if t % (count - 1) == 0]
+        if all(np.linalg.norm(points[a, i] - points[b, jb]) <= tol for i, jb in on):
+            pairs.append((a, b, j0, span))
+    return sorted(pairs)
+
+
+@pytest.mark.parametrize("scene", ["torus", "cube", "toroidal_tet", "suzanne"])
+def test_side_pairs_from_table_neighbours_are_those_found_by_geometry(device, scene):
+    """The tessellation's side pairs start from the table's (topological) neighbours: on the voxel
+    scenes they are exactly the pairs a search among every side finds by position alone."""
+    from shadowcl.scene import Scene
+    from shadowcl.voxel import scene_patches
+
+    table = scene_patches(device, Scene.load(SCENES / "subdivision" / f"{scene}.toml"))
+    vox = vz.voxelize(device, table, 32)
+    a, b, start, span = vz.matching_sides(vox)
+    assert len(a) > 0
+    assert sorted(zip(a.tolist(), b.tolist(), start.tolist(), span.tolist())) == sides_by_geometry(vox)
 
 
 def test_eval_points_match_reference(device, rng):

@@ -14,17 +14,26 @@ Pipeline (kernels/angular.cl):
    clears them by :data:`POLE_CLEARANCE`, so that a scan line stays in one row). A directional light
    uses parallel rows (planes Y = const, s = X).
 3. **Table** (sections 3-5, 7.1), built on the device: per table face, its plane and the rows whose
-   centre it spans (first row, count); the records per row and their exclusive prefix sum on the host (a
+   band ``[t0 + k dt, t0 + (k + 1) dt]`` its row-coordinate range meets, widened by :data:`ANGLE_PAD`
+   (first row, count); the records per row and their exclusive prefix sum on the host (a
    difference array over the faces' row intervals: per-row atomic counters on the device contended on a
-   few hundred addresses, 0.45 s for 600 k faces); a fill pass writing one record per (face, row) at its
+   few hundred addresses, 0.45 s for 600 k faces); a fill pass writing one record per (face, row, piece) at its
    row's offset plus an atomic cursor, then a sort of each row by ``s_lo`` (kernels/lists.h)
-   (the paper's pairwise sort). A record is the face's span ``[s_lo, s_hi]`` in the row -- the paper's
-   pair of crossings: a ridge-edge crossing where the face touches a loop, a visible-edge crossing
-   otherwise, so visible edges enter "in duplicate" (section 5) -- plus the face plane for depth. Pairs
-   therefore come from one face each: loops never need the local-peak pairing of section 4 to pair
-   correctly, however they coil (the reference builds the paper's loop-only table with that pairing and
-   the tests check both agree). Depth is exact (the ray meets the stored plane) instead of interpolated
-   between the pair's ends.
+   (the paper's pairwise sort). A record is the face's span ``[s_lo, s_hi]`` over the row's whole band
+   (the face clipped to the band's wedge -- slab for a directional light --, s extreme at a corner or where
+   an edge's great circle comes nearest the pole; widened by :data:`S_PAD`; a wide one cut into pieces of
+   at most 1 / :data:`PIECES` of the s range, as a span across the row -- a ground under the occluders --
+   kept the lookups' backward scan from stopping early: 100 000 cubes on a ground, 600 rows, 500 000
+   receivers: 2.70 -> 0.59 s, the loop table 0.27 s) -- the paper's pair of
+   crossings: a ridge-edge crossing where the face touches a loop, a visible-edge crossing otherwise, so
+   visible edges enter "in duplicate" (section 5) -- plus the face plane for depth. Pairs therefore come
+   from one face each: loops never need the local-peak pairing of section 4 to pair correctly, however
+   they coil (the reference builds the paper's loop-only table with that pairing and the tests check both
+   agree). A lookup tests the face itself: the plane (exact depth instead of r interpolated between the
+   pair's ends), then the triangle's three edge functions (watertight: a shared edge's function is
+   computed from its lower vertex index, the same bits for both faces). Since every direction the face
+   covers in the band lies in its span, no face is missed, and since the hit must lie in the triangle, no
+   plane counts past its face's edges: the table has no discretization error (see below).
    Table faces: the light-facing faces of each closed manifold component (a blocked ray always crosses
    one); every face of an open or non-manifold component (a ray can be stopped by a hidden face there).
 3b. **The paper's table** (``table="loops"``, :func:`loop_pairs`): for the closed components, each ridge
@@ -53,27 +62,22 @@ Pipeline (kernels/angular.cl):
    at s = +-1 in every row (without it the pillars round the pole in the light-inside scene lost their
    shadows: 225 wrong pixels against 12). Open and non-manifold components keep face records in the same
    rows (their hidden faces can stop rays, and their loops need not close).
-   Default ``table="faces"``, by bench/results/angular.md (same rows, same receivers, 2 shared cores):
-   on bunny, teapot and ogre (open meshes: their faces keep face records either way) the error is the
-   same and the loop table only adds the loop work (prepare + classify at the default rows 0.47 / 0.31 /
-   0.31 s against 0.39 / 0.21 / 0.29 s); on the 12 hard scenes the mean error is the same (0.00049 at
-   the default rows), the loop table better on contact, sphere_terminator, thin_occluder, shared_edges,
-   light_inside (the chord keeps a sphere's terminator band off the lit cap) and worse on coplanar and
-   far_offset (0.00110 / 0.00096 against 0.00028 / 0.00020). coplanar: receivers inside the other of two
-   interpenetrating boxes lie between the lit top and the chord below it, in front of the depth (never
-   visible: its render error is lower, 0.00015 against 0.00019); far_offset: not traced (false light
-   around the tube and the arch, concave solids, 21 of 25 wrong at 600 rows). The loop table is also
-   slower to build (1.33 s against 0.44 s at 100 000 cubes: the loops are chained on the host), though
-   faster to look up (0.060 s against 0.095 s for 500 000 receivers; a table 3.8 x smaller). Exact depth
-   from face planes also holds on every mesh without the chord's assumptions (no layered folds of one
-   lit region, a cap convex between creases). But a face record is the face's cut by the row's *centre*:
-   a receiver lying on a closed occluder's lit cap, up to half a row off it, meets the plane of a
-   neighbouring face extended past its edge, above a convex cap, and is falsely shadowed
-   (bench/results/angular_caps.md: 12-21 % of such receivers on a sphere, torus or cylinder under a
-   directional light, 0.25-7 % with the loop table, whose chord lies below the cap). Requiring the ray to
-   cross the listed face removes those (0 on the sphere) but turns the listings a row's centre misses
-   into false lights in the shadow (ground receivers: 9 -> 55-110 of 1,500): that needs spans over the
-   whole row, not done.
+   Default ``table="faces"``: exact but for float32 ties, where the loop table keeps its half-row band
+   (bench/results/angular_revisions.md: 0 of 500 000 receivers wrong on bunny, ogre and teapot at the
+   default rows, 0.094 / 0.105 / 0.037 % before; angular_caps.md: no false shadow or light on any
+   occluder or ground set). The row-centre spans it replaced (a face listed in the rows whose centre it
+   spans, cut there, its plane tested without its edges: the paper's discretization) falsely shadowed
+   15-22 % of the receivers lying on a sphere's, torus's or cylinder's lit cap under a directional light (a
+   receiver up to half a row off the centre met a neighbouring face's plane extended past its edge);
+   testing the triangle against those spans removed the caps' errors but missed the faces a row's centre
+   does not cut (46-101 false lights per 1,500 ground receivers). Band spans list each face in about one
+   more row than row-centre spans did (which left most small faces in no row at all), and wide ones in
+   pieces: at the default rows 193 k -> 311 k records on the bunny, 133 k -> 263 k on the ogre, 65 k ->
+   108 k on the teapot; the lookups test more candidates, and a plane hit also its edges (9-32 % of the
+   lookup time, against a plane-only build): ``Shadows.mask`` took 1.23 / 1.37 / 1.13 x its old time on
+   500 000 receivers, ``sc.prepare`` 1.35 / 1.35 / 1.39 x (medians of the interleaved rounds' ratios,
+   load ~8.5 on 2 shared cores). The loop table keeps the paper's error and is slower to build (its loops are
+   chained on the host).
 4. **Lookups**: per receiver, its row and ``s``; a binary search finds the records starting at or
    before ``s``, a backward scan tests them (first hit wins) and stops where the row's running maximum
    of ``s_hi`` falls below ``s`` (section 7 step 2, without walking the whole entry). ``classify_view``
@@ -92,15 +96,12 @@ Pipeline (kernels/angular.cl):
 A point light inside a closed solid (winding number of a closed component round it >= 1/2) raises
 ``ValueError``: every point outside that solid is in its shadow, and no face of it turns to the light.
 
-Discretization error: a receiver is judged with its occluders' spans at its row's centre, so it can
-differ from the exact method only when its ray passes within half a row (in theta; in Y for a
-directional light) of an edge of a table face whose span covers it in one of the two planes and not the
-other -- near shadow boundaries, and where the face covering it at the row's centre is a neighbour of its
-own: at concave creases and at terminators, where the ray grazes the surface (the 256-segment sphere's
-terminator is the worst hard case: 2.3 % of the pixels at 160 x 90, 0.17 % at 960 x 540). Refusing a face
-to receivers whose own theta lies outside the face's theta range was tried and doubled the error on the
-bunny, ogre and the terminator: the faces it refused were mostly standing in for a true blocker that the
-row's centre plane misses.
+Error: with ``table="faces"`` a receiver differs from the exact method only by float32 rounding (a ray
+within ~1e-6 of a face's size from its edge, or a hit within rounding of eps): rows and spans are widened
+past the receivers' float32 row coordinate and s (:data:`ANGLE_PAD`, :data:`S_PAD`, :data:`LENGTH_PAD`),
+so a receiver on a row boundary meets the same faces in either row. With ``table="loops"`` the pairs are
+cut at the row's centre: a receiver can differ when its ray passes within half a row (in theta; in Y for
+a directional light) of a loop edge, near shadow boundaries and terminators.
 
 >>> method = AngularMethod(get_device(), theta_resolution=600)
 >>> method.prepare(mesh, light, receiver_bounds, eps)
@@ -120,6 +121,7 @@ from .lights import PointLight
 from .methods import Method, check_prepare
 from .points import check_points
 from .lightspace import box_corners, orthonormal_basis
+from .lists import check_filled
 from .silhouette import edge_adjacency, silhouette_edges, silhouette_loops
 from .topology import components, concave_edges
 
@@ -134,6 +136,16 @@ ROWS_PER_LINE = 2              # render's default rows per scan line (view_rows)
 TABLES = ("faces", "loops")
 RUN_PIECE = 64                 # classify_lines: receivers per work-item at most (a run never crosses a piece)
 SAMPLE = 20000                 # occluder vertices sampled for the frame choice
+ANGLE_PAD = 1e-5               # radians: a face is listed in the rows its theta range meets widened by this (times
+                               # r / rho, a corner's distance from the light over that from the pole axis): a receiver's
+                               # float32 theta rounds by ~1e-7 r / rho (atan2 a few ulp of pi): 10-100 x margin
+S_PAD = 1e-5                   # spans widened by this in s (point light: a receiver's float32 s = x / |p| is ~1e-7 off)
+LENGTH_PAD = 1e-5              # directional light: rows and spans (lengths) widened by this times the occluders'
+                               # extent from the frame's origin (float32 coordinates round by ~6e-8 of it)
+PIECES = 16                    # a face's span is cut in pieces of at most 1 / PIECES of the s range (point: 2;
+                               # directional: twice the occluders' extent), so a ground's row-wide span cannot
+                               # keep lookups from ending early (kernels/angular.cl face_rows); not more: a
+                               # scan-line run ends at every piece's end (64: the runs' lookups went up 30 %)
 
 
 def ridge_loops(device, mesh: Mesh, light):
@@ -176,7 +188,10 @@ class Frame:
     """World -> angular frame: ``local = rotation @ (world - origin)``; the light at the origin for a
     point light; rows over ``[t0, t0 + rows * dt)``; ``full_circle`` rows wrap round. ``centre`` (world)
     is the occluders' box centre: the kernels hold receivers and face planes relative to it
-    (:attr:`anchor`), so that a distant point light costs the depth test no precision."""
+    (:attr:`anchor`), so that a distant point light costs the depth test no precision. ``pad_t`` and
+    ``pad_s`` widen a face's row range and spans against float32 rounding (:data:`ANGLE_PAD`,
+    :data:`S_PAD`; :data:`LENGTH_PAD` times the occluders' extent for a directional light);
+    ``piece_width`` is the widest span piece (:data:`PIECES`)."""
 
     origin: np.ndarray
     rotation: np.ndarray
@@ -186,6 +201,9 @@ class Frame:
     rows: int
     full_circle: bool
     centre: np.ndarray
+    pad_t: float = ANGLE_PAD
+    pad_s: float = S_PAD
+    piece_width: float = 2.0 / PIECES
 
     @property
     def anchor(self) -> np.ndarray:
@@ -290,13 +308,16 @@ class LoopSet:
 class Table:
     """One light's lookup table on the device: ``offsets`` (rows + 1) int32 CSR and ``records``
     (entries x 8) float32 (``s_lo, s_hi, nx, ny, nz, d, face, running max of s_hi``; face as int32 bits),
-    rows sorted by ``s_lo``."""
+    rows sorted by ``s_lo``; ``relative`` (anchor-relative float32 vertices) and ``faces``: the triangles a
+    lookup tests a face record's hit against."""
 
     frame: Frame
     offsets: object
     records: object
     entries: int
     table_faces: np.ndarray
+    relative: object
+    faces: object
 
     @property
     def nbytes(self) -> int:
@@ -322,11 +343,16 @@ def build_table(device, local_vertices: np.ndarray, faces: np.ndarray, table_fac
     planes_g = dev.empty(16 * max(n, 1), "face planes")
     first_g = dev.empty(4 * max(n, 1), "face first rows")
     nrows_g = dev.empty(4 * max(n, 1), "face row counts")
+    pads_g = dev.empty(4 * max(n, 1), "face row pads")
+    pieces_g = dev.empty(4 * max(n, 1), "face span pieces")
     scalars = (np.int32(n), np.float32(frame.t0), np.float32(frame.dt), np.int32(rows))
     if n:
         dev.kernel("angular.cl", "face_rows", options)(queue, (n,), None, vertices_g, relative_g, faces_g, ids_g,
-                                                       *scalars, *anchor, planes_g, first_g, nrows_g)
-    counts = row_counts(dev.from_device(first_g, n, np.int32), dev.from_device(nrows_g, n, np.int32), rows)
+                                                       *scalars, *anchor, np.float32(frame.pad_t),
+                                                       np.float32(frame.piece_width), planes_g, first_g, nrows_g, pads_g,
+                                                       pieces_g)
+    counts = row_counts(dev.from_device(first_g, n, np.int32), dev.from_device(nrows_g, n, np.int32), rows,
+                        dev.from_device(pieces_g, n, np.int32))
     pairs = None if loops is None else loop_pairs(dev, vertices_g, loops, frame, stats)
     npairs = np.zeros(rows, dtype=np.int64) if pairs is None else pairs[2]
     counts = counts + npairs
@@ -347,15 +373,16 @@ def build_table(device, local_vertices: np.ndarray, faces: np.ndarray, table_fac
         cursor_g = dev.to_device(npairs.astype(np.int32))
         if n:
             dev.kernel("angular.cl", "fill_rows", options)(queue, (n,), None, vertices_g, faces_g, ids_g, *scalars,
-                                                           planes_g, first_g, nrows_g, offsets_g, cursor_g, records_g)
-        check_rows_filled(dev, cursor_g, offsets, "fill_rows")
+                                                           np.float32(frame.pad_s), planes_g, first_g, nrows_g, pads_g,
+                                                           pieces_g, offsets_g, cursor_g, records_g)
+        check_filled(dev, cursor_g, "angular fill_rows", offsets)
         t2 = time.perf_counter()
         dev.kernel("angular.cl", "sort_rows", options)(queue, (rows,), None, offsets_g, np.int32(rows), records_g)
     queue.finish()
     t3 = time.perf_counter()
     stats.update(count_s=t1 - t0, fill_s=t2 - t1, sort_s=t3 - t2,
                  entries=entries, rows=rows, max_row=int(counts.max(initial=0)), table_bytes=4 * (rows + 1) + nbytes)
-    return Table(frame, offsets_g, records_g, entries, np.asarray(table_faces, dtype=np.int32))
+    return Table(frame, offsets_g, records_g, entries, np.asarray(table_faces, dtype=np.int32), relative_g, faces_g)
 
 
 def loop_pairs(device, vertices_g, loops, frame: Frame, stats: dict):
@@ -403,7 +430,7 @@ def loop_pairs(device, vertices_g, loops, frame: Frame, stats: dict):
             dev.kernel("angular.cl", "fill_edges", options)(
                 queue, (ne,), None, vertices_g, tails_g, heads_g, dev.to_device(group), np.int32(ne), np.int32(nridge),
                 *scalars[1:], first_g, count_g, offsets_g, cursor_g, cross_g)
-        check_rows_filled(dev, cursor_g, offsets, "fill_edges")
+        check_filled(dev, cursor_g, "angular fill_edges", offsets)
     queue.finish()
     t_pair = time.perf_counter()
     while True:
@@ -476,30 +503,19 @@ def check_capacity(device, entries: int, rows: int, what: str) -> None:
                          f"the device holds in one buffer ({device.max_alloc_bytes >> 20} MiB); use fewer rows")
 
 
-def check_rows_filled(device, cursor_g, offsets: np.ndarray, kernel: str) -> None:
-    """Raise ``RuntimeError`` when a fill kernel's row cursors (``cursor_g``, (rows,) slots taken) went past
-    their rows' slots (``offsets``, (rows + 1,)): the kernel dropped those writes, so the table would be
-    silently short. The counts come from the same per-item row ranges, so this is a bug, not a size to grow."""
-    rows = len(offsets) - 1
-    taken = device.from_device(cursor_g, rows, np.int32).astype(np.int64)
-    over = np.flatnonzero(taken > np.diff(offsets))
-    if len(over):
-        k = int(over[0])
-        raise RuntimeError(f"angular {kernel}: {len(over)} rows got more records than counted, first row {k} "
-                           f"({taken[k]} for {int(offsets[k + 1] - offsets[k])} slots); writes past them were dropped")
-
-
-def row_counts(first: np.ndarray, count: np.ndarray, rows: int) -> np.ndarray:
-    """(rows,) records per row from each face's first row (unwrapped) and row count, by a difference array:
-    per-row atomic counters on the device serialised on ~600 addresses (0.45 s for 600 k faces)."""
+def row_counts(first: np.ndarray, count: np.ndarray, rows: int, per_row=None) -> np.ndarray:
+    """(rows,) records per row from each item's first row (unwrapped), row count and records in each of its
+    rows (``per_row``, default 1), by a difference array: per-row atomic counters on the device serialised
+    on ~600 addresses (0.45 s for 600 k faces)."""
+    w = np.ones(len(first), dtype=np.int64) if per_row is None else np.asarray(per_row, dtype=np.int64)
     start = np.mod(first.astype(np.int64), rows)
     end = start + count
     inside = end <= rows                                      # intervals that do not wrap round
-    diff = np.bincount(start, minlength=rows + 1)[:rows + 1].astype(np.int64)
-    diff -= np.bincount(np.where(inside, end, rows), minlength=rows + 1)[:rows + 1]
-    wrapped = end[~inside] - rows
-    diff[0] += len(wrapped)
-    diff -= np.bincount(wrapped, minlength=rows + 1)[:rows + 1]
+    diff = np.bincount(start, w, minlength=rows + 1)[:rows + 1].astype(np.int64)
+    diff -= np.bincount(np.where(inside, end, rows), w, minlength=rows + 1)[:rows + 1].astype(np.int64)
+    wrapped = ~inside
+    diff[0] += w[wrapped].sum()
+    diff -= np.bincount(end[wrapped] - rows, w[wrapped], minlength=rows + 1)[:rows + 1].astype(np.int64)
     return np.cumsum(diff[:rows]).astype(np.int64)
 
 
@@ -540,9 +556,10 @@ class AngularMethod(Method):
                                    "receiver; 600 when their number is unknown), and for render from the image "
                                    "(ROWS_PER_LINE rows per scan line)"),
         "expected_receivers": (None, "about how many receivers are coming, used to pick theta_resolution"),
-        "table": ("faces", "'faces': one span record per (light-facing face, row), exact depth from the face plane; "
-                           "'loops': the paper's table, the ridge-edge loops' crossings paired per loop (section 4), "
-                           "depth interpolated between a pair's ends (see the module docstring for the choice)"),
+        "table": ("faces", "'faces': one span record per (light-facing face, row band it meets), the hit tested on "
+                           "the triangle: exact but for float32 ties; 'loops': the paper's table, the ridge-edge "
+                           "loops' crossings paired per loop (section 4) at the row's centre, depth interpolated "
+                           "between a pair's ends (see the module docstring for the choice)"),
         "runs": (True, "classify_view: one lookup serves a run of pixels on a scan line (False: one per pixel)"),
         "prefer_x": (None, "preferred pole axis (world vector); None: away from the occluders, and for render "
                            "the camera's right axis when it is clear of them (rows along the scan lines)"),
@@ -622,7 +639,14 @@ class AngularMethod(Method):
             pad = 0.5 * span / rows
             lo, hi = lo - pad, hi + pad
         centre = 0.5 * (mesh.vertices[used].min(axis=0) + mesh.vertices[used].max(axis=0)) if len(used) else origin
-        frame = Frame(origin, rotation, point, lo, (hi - lo) / rows, rows, full, np.asarray(centre, dtype=np.float64))
+        if point:
+            pads = (ANGLE_PAD, S_PAD, 2.0 / PIECES)
+        else:
+            extent = float(np.abs(local[used]).max()) if len(used) else 0.0
+            extent = extent if extent > 0 else 1.0                 # (all corners at the origin: nothing blocks)
+            pads = (LENGTH_PAD * extent, LENGTH_PAD * extent, 2.0 * extent / PIECES)
+        frame = Frame(origin, rotation, point, lo, (hi - lo) / rows, rows, full, np.asarray(centre, dtype=np.float64),
+                      *pads)
         loops = None
         if self.table_kind == "loops":
             # closed components by their loops (the row range above already covers them); open or
@@ -688,7 +712,7 @@ class AngularMethod(Method):
     def _common_args(self):
         f = self.frame
         return (np.float32(f.t0), np.float32(1.0 / f.dt), np.int32(f.rows), np.float32(self.eps),
-                self.table.offsets, self.table.records)
+                self.table.offsets, self.table.records, self.table.relative, self.table.faces)
 
     def classify(self, points, normals=None) -> np.ndarray:
         """Bool (N,) mask of world ``points`` (optional ``normals``, any length), True = in shadow."""
@@ -738,7 +762,7 @@ class AngularMethod(Method):
         if not _same_axis(prefer_x, self.prefer_x):
             _, rotation = angular_frame(self.light, self.mesh.vertices[self._sample], prefer_x)
             frame = Frame(frame.origin, rotation, frame.point, frame.t0, frame.dt, frame.rows, frame.full_circle,
-                          frame.centre)
+                          frame.centre, frame.pad_t, frame.pad_s, frame.piece_width)
         t = np.full(view.height * view.width, np.nan)
         t[seen.pixel_index] = row_coordinate(frame.to_local(seen.points), frame.point)
         step = np.abs(np.diff(t.reshape(view.height, view.width), axis=0))

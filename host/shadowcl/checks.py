@@ -29,6 +29,44 @@ def finite_array(name: str, value, shape_tail: tuple[int, ...], dtype=np.float64
     return array
 
 
+def integer_array(name: str, value, empty: bool = False) -> np.ndarray:
+    """``value`` as an integer NumPy array (bools refused), else a TypeError naming ``name``; with
+    ``empty``, an empty 1-D sequence of any dtype (``[]`` is float to NumPy) is no indices (int64)."""
+    try:
+        array = np.asarray(value)
+    except Exception as error:  # ragged lists and the like
+        raise TypeError(f"{name}: cannot be read as indices ({error})") from None
+    if empty and array.ndim == 1 and array.size == 0:
+        array = array.astype(np.int64)
+    if array.dtype == bool or not np.issubdtype(array.dtype, np.integer):
+        raise TypeError(f"{name}: expected integer indices, got dtype {array.dtype}")
+    return array
+
+
+class VertexIndexError(ValueError):
+    """A face refers to a vertex that does not exist; ``face`` is that face (a file reader finds its line)."""
+
+    def __init__(self, message: str, face: int):
+        super().__init__(message)
+        self.face = face
+
+
+def vertex_indices(name: str, corners: np.ndarray, n_vertices: int, sizes=None, base: int = 0) -> None:
+    """Raise :class:`VertexIndexError` (a ValueError) naming ``name`` at the first vertex index in
+    ``corners`` outside [0, ``n_vertices``): its face, the index as the caller wrote it (counted from
+    ``base``) and the vertex count. ``corners`` is (F, K) integers, a row per face, or with ``sizes`` the
+    corners of faces of ``sizes`` corners each, one face after another."""
+    corners = np.asarray(corners)
+    if corners.size == 0 or (corners.min() >= 0 and corners.max() < n_vertices):
+        return
+    flat = corners.ravel()
+    at = int(np.flatnonzero((flat < 0) | (flat >= n_vertices))[0])
+    face = at // corners.shape[1] if sizes is None else int(np.searchsorted(np.cumsum(sizes), at, side="right"))
+    counted = f" (numbered from {base})" if base else ""
+    raise VertexIndexError(f"{name}: face {face} has vertex index {int(flat[at]) + base} out of range for "
+                           f"{n_vertices} vertices{counted}", face)
+
+
 def vector3(name: str, value, nonzero: bool = False) -> np.ndarray:
     """``value`` as a finite float64 3-vector (non-zero length if asked); booleans and strings are not numbers."""
     items = value if isinstance(value, (list, tuple)) else [value]

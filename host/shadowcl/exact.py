@@ -96,6 +96,7 @@ from . import lightspace
 from .checks import choice, flag, optional_int, positive_int
 from .geometry import Mesh, bounds_diagonal
 from .lights import PointLight
+from .lists import check_filled
 from .methods import Method, check_prepare
 from .points import MovedPoints, check_points
 
@@ -440,7 +441,7 @@ class ExactMethod(Method):
             dev.kernel("exact.cl", "exact_bin_fill", options)(queue, (n,), None, np.int32(n), self.lists.params,
                                                               np.int32(brute_cell), start, slot, offsets, by_cell, index,
                                                               dropped)
-            lightspace.check_dropped(dev, dropped, "exact: the receivers' binning")
+            check_filled(dev, dropped, "exact: the receivers' binning")
             packets = -(-binned_count // BIN_LANES)
             dev.kernel("exact.cl", "exact_classify", options)(
                 queue, (packets,), None, by_cell, index, np.int32(binned_count), self.lists.params, self._records,

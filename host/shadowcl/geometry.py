@@ -6,7 +6,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .checks import finite_array
+from .checks import finite_array, integer_array, vertex_indices
 from .meshio import read_polygons
 
 
@@ -21,23 +21,15 @@ class Mesh:
 
     def __init__(self, vertices, faces):
         vertices = finite_array("vertices", vertices, (3,))
-        try:
-            faces_in = np.asarray(faces)
-        except Exception as error:
-            raise TypeError(f"faces: cannot be read as an array ({error})") from None
-        if faces_in.dtype == bool or not np.issubdtype(faces_in.dtype, np.integer):
-            raise TypeError(f"faces: expected integer vertex indices, got dtype {faces_in.dtype}")
+        faces_in = integer_array("faces", faces)
         if faces_in.ndim != 2 or faces_in.shape[1] != 3:
             raise ValueError(f"faces: expected shape (F, 3), got {faces_in.shape}")
         if len(faces_in) == 0:
             raise ValueError("faces: the mesh is empty (no triangles)")
         if len(vertices) == 0:
             raise ValueError("vertices: the mesh has faces but no vertices")
-        low, high = int(faces_in.min()), int(faces_in.max())
-        if low < 0:
-            raise ValueError(f"faces: negative vertex index {low}")
-        if high >= len(vertices):
-            raise ValueError(f"faces: vertex index {high} out of range for {len(vertices)} vertices")
+        vertex_indices("faces", faces_in, len(vertices))
+        high = int(faces_in.max())
         if high > np.iinfo(np.int32).max:   # faces are stored int32: a larger index would wrap silently
             raise ValueError(f"faces: vertex index {high} does not fit int32; at most 2^31 vertices are used")
         if np.abs(vertices).max() >= np.finfo(np.float32).max:

@@ -46,7 +46,7 @@ vertices on the light's plane: they are points at infinity, kept as directions.
 
 **Lists on the device.** ``lists="csr"`` (the default): count (atomic increments per cell; each
 primitive also records its cells as a 64-bit mask over its candidate cells), exclusive prefix sum
-(three launches of serial blocks, no local memory), fill (atomic decrements give each entry its slot;
+(two launches of serial blocks, no local memory: :func:`lists.prefix_sum`), fill (atomic decrements give each entry its slot;
 the mask spares re-projecting). The order within a cell is whatever the atomics give: the exact test
 does not depend on it (sorting by distance would only shorten walks of lit receivers, which the exact
 method's plane cull already makes cheap). ``lists="linked"``: one pass, nodes taken from an atomic
@@ -69,6 +69,7 @@ import pyopencl as cl
 from . import lists
 from .checks import positive_int
 from .lights import DirectionalLight, PointLight
+from .lists import check_filled
 
 DELTA = 1.0 / 64.0          # cell enlargement in cells (kernels/lightspace.cl: LS_DELTA)
 VIEW_FLOATS = 32            # floats per view record (kernels/lightspace.h)
@@ -411,7 +412,7 @@ class ListBuilder:
             items = dev.empty(4 * max(total, 1), "light-space lists")
             csr(queue, gsize, None, prims, np.int32(nprims), params, self._counts, records, np.int32(1), offsets,
                 items, dropped)
-            check_dropped(dev, dropped, "lightspace: the lists' fill")
+            check_filled(dev, dropped, "lightspace: the lists' fill")
             t3 = time.perf_counter()
             lists.offsets, lists.items, lists.entries, lists.capacity = offsets, items, total, total
             fine = np.empty(1, np.int32)
@@ -447,15 +448,6 @@ class ListBuilder:
     def prefix_sum(self, grid: Grid, counts: cl.Buffer, n: int, offsets: cl.Buffer) -> int:
         """offsets = exclusive prefix sum of counts (n + 1 entries); returns the total (:func:`lists.prefix_sum`)."""
         return lists.prefix_sum(self.device, lambda name: self._kernel(grid, name), counts, n, offsets)
-
-
-def check_dropped(device, dropped: cl.Buffer, what: str) -> None:
-    """Raise if a kernel counted writes it dropped in ``dropped`` (one int): a fill meeting more entries
-    than its count gave slots for, which count and fill computing the same cells rule out (a bug)."""
-    count = int(device.from_device(dropped, 1, np.int32)[0])
-    if count:
-        raise RuntimeError(f"{what} met {count} entries more than its count made room for (a bug); "
-                           "nothing was written out of bounds, but the result would be incomplete")
 
 
 def point_cells(device, grid: Grid, points_rel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -16,6 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .checks import VertexIndexError, vertex_indices
+
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off")
 FLOAT32_MAX = float(np.finfo(np.float32).max)
 
@@ -111,11 +113,10 @@ def _checked(vertices: np.ndarray, corners: np.ndarray, sizes: np.ndarray, verte
     if len(small):
         raise _Malformed(f"face {small[0]} has {sizes[small[0]]} corners; a face needs at least 3",
                          where(polygon_lines, small[0]))
-    out = np.flatnonzero((corners < 0) | (corners >= len(vertices)))
-    if len(out):
-        face = int(np.searchsorted(np.cumsum(sizes), out[0], side="right"))
-        raise _Malformed(f"face {face} refers to vertex {corners[out[0]] + index_base}, but the file has "
-                         f"{len(vertices)} vertices, numbered from {index_base}", where(polygon_lines, face))
+    try:
+        vertex_indices("faces", corners, len(vertices), sizes, index_base)
+    except VertexIndexError as error:
+        raise _Malformed(str(error), where(polygon_lines, error.face)) from None
     return Polygons(vertices, corners, sizes)
 
 

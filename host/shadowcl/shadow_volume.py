@@ -92,7 +92,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import raster
-from .checks import check_bounds, choice, non_negative_float
+from .checks import check_bounds, choice, non_negative_float, optional_int
 from .exact import ExactMethod
 from .geometry import Mesh, bounds_diagonal
 from .lightspace import box_corners
@@ -281,6 +281,8 @@ class ShadowVolumeMethod(Method):
                             "shadow_mask and render pass theirs; None: points on the mesh in the bounds"),
         "stencil": ("zfail", "render's stencil: 'zfail' (Everitt-Kilgard, robust to the near plane) or 'zpass' "
                              "(refused when the near plane cuts a volume face)"),
+        "expected_receivers": (None, "about how many receivers classify will see, sizing its cap lists' grid "
+                                     "(None: the first query's count; method='auto' queries a small sample first)"),
     }
 
     def __init__(self, device, **params):
@@ -294,6 +296,7 @@ class ShadowVolumeMethod(Method):
         self.silhouettes = choice("silhouettes", p["silhouettes"], TRACKER_METHODS)
         self.stencil = choice("stencil", p["stencil"], STENCILS)
         self.max_error = non_negative_float("max_error", p["max_error"])
+        self.expected_receivers = optional_int("expected_receivers", p["expected_receivers"])
         from .auto import calibration_receivers
         self.receivers = calibration_receivers(p["receivers"])
         self._tracker: SilhouetteTracker | None = None
@@ -380,7 +383,8 @@ class ShadowVolumeMethod(Method):
             cap = np.flatnonzero(face_facing(self.device, self.occluders, self.light))
             self.stats["cap_triangles"] = len(cap)
             if len(cap):
-                self._exact = ExactMethod(self.device, expected_receivers=max(len(receivers), 1))
+                expected = self.expected_receivers or max(len(receivers), 1)
+                self._exact = ExactMethod(self.device, expected_receivers=expected)
                 self._exact.prepare(Mesh(self.occluders.vertices, self.occluders.faces[cap]), self.light,
                                     self.bounds, self.eps)
                 self.stats.update(count_lists_s=self._exact.stats["prepare_s"],

@@ -10,7 +10,7 @@ from .geometry import Mesh, bounds_diagonal
 from .lights import DirectionalLight
 from .methods import method_class
 from .reference import exact as ref
-from .voxelize import Patches
+from .subdivision import PatchTable
 
 FLOAT_BAND = 1e-5   # of the scene's size: float32 rounding, as test_exact.py
 # Of the scene's size, the distance from a shadow edge within which a method's answer is its
@@ -126,9 +126,10 @@ def aimed_receivers(mesh: Mesh, towards_light, per_edge: int, rng, light_positio
     return receivers[inside]
 
 
-def grid_patch_table(net, wrap_u: bool = False, wrap_v: bool = False) -> Patches:
+def grid_patch_table(net, wrap_u: bool = False, wrap_v: bool = False) -> PatchTable:
     """Regular B-spline patches of the (m, n, 3) control grid ``net`` (u along the first axis, v along
-    the second): one per interior span, or per span along a wrapped axis (a torus wraps both).
+    the second): one per interior span, or per span along a wrapped axis (a torus wraps both); each is
+    its own control face, over the unit domain.
 
     Patch normals (du x dv) follow the grid's orientation: make it outward for closed surfaces.
     """
@@ -163,5 +164,5 @@ def grid_patch_table(net, wrap_u: bool = False, wrap_v: bool = False) -> Patches
         return np.where(ok, np.clip(x, 0, pu - 1) * pv + np.clip(y, 0, pv - 1), -1)
 
     neighbors = np.stack([index(a, b - 1), index(a + 1, b), index(a, b + 1), index(a - 1, b)], axis=-1)
-    return Patches(points, (16 * np.arange(count)).astype(np.uint32), np.zeros(count, np.uint32),
-                          neighbors.reshape(-1, 4).astype(np.int32))
+    return PatchTable(points, 16 * np.arange(count), np.zeros(count), np.arange(count),
+                      np.tile([0.0, 0.0, 1.0, 1.0], (count, 1)), np.zeros(count), neighbors.reshape(-1, 4))

@@ -52,10 +52,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pyopencl as cl
-from scipy.spatial import cKDTree
 
 from .checks import check_bounds, choice, positive_int
 from .geometry import Mesh
+from .subdivision.patches import PatchTable
 from .topology import components
 
 CONNECTIVITIES = (6, 18, 26)
@@ -87,6 +87,7 @@ class Voxelization:
     stats: dict = field(default_factory=dict)
     table_dev: tuple = field(default=(), repr=False)     # the patch table's points, first, levels on the device
     npatches: int = 0
+    neighbors: np.ndarray = field(default_factory=lambda: np.zeros((0, 4), np.int32), repr=False)  # the table's
 
     @property
     def nleaves(self) -> int:
@@ -197,11 +198,11 @@ def grid_frame(points: np.ndarray, resolution: int, bounds=None, control_points=
     return 0.5 * (lo + hi) - 0.5 * size * resolution, size
 
 
-def patch_table_of(device, surface_or_table):
-    """The patch table of a surface (``.patch_table(device)``) or a table itself (``points``, ``first``, ``levels``)."""
+def patch_table_of(device, surface_or_table) -> PatchTable:
+    """The patch table of a surface (``.patch_table(device)``) or a table itself."""
     if hasattr(surface_or_table, "patch_table"):
         return surface_or_table.patch_table(device)
-    if all(hasattr(surface_or_table, name) for name in ("points", "first", "levels")):
+    if isinstance(surface_or_table, PatchTable):
         return surface_or_table
     raise TypeError(f"surface: expected a SubdivisionSurface or a PatchTable, got {type(surface_or_table).__name__}")
 
@@ -318,38 +319,28 @@ def voxelize(device, surface_or_table, resolution: int, connectivity: int = 26,
                  frame_buffer=bool(frame_buffer), frame_bytes=frame_bytes if frame_buffer else 0,
                  leaf_bytes=4 * LEAF_WORDS * nleaves, subpatches=int(sum(n for _, n, _ in per_level)))
     return Voxelization(resolution, connectivity, origin, size, leaves, leaves_g, frame_dev, dev, stats,
-                        (points_g, first_g, levels_g), npatch)
+                        (points_g, first_g, levels_g), npatch, table.neighbors)
 
 
-@dataclass(frozen=True)
-class Patches:
-    """A patch table with just what the voxelizer reads (the contract's ``points``, ``first``,
-    ``levels``, ``neighbors``): built from a control grid (:func:`grid_patch_table`, no subdivision code:
-    tests and benches) or from several surfaces' tables (:func:`merge_tables`, a scene)."""
-
-    points: np.ndarray
-    first: np.ndarray
-    levels: np.ndarray
-    neighbors: np.ndarray
-
-
-def merge_tables(tables) -> Patches:
-    """One table holding every patch of ``tables`` in order (patch ids offset, neighbours renumbered)."""
+def merge_tables(tables) -> PatchTable:
+    """One table holding every patch of ``tables`` in order (patch, point and face ids offset, neighbours
+    renumbered)."""
     tables = list(tables)
     if not tables:
         raise ValueError("surfaces: nothing to voxelize")
-    points, first, levels, neighbors = [], [], [], []
-    point_base = patch_base = 0
+    parts = {name: [] for name in ("points", "first", "levels", "face", "domain", "rotation", "neighbors")}
+    point_base = patch_base = face_base = 0
     for table in tables:
-        points.append(np.asarray(table.points, dtype=np.float32))
-        first.append(np.asarray(table.first, dtype=np.int64) + point_base)
-        levels.append(np.asarray(table.levels, dtype=np.uint32))
         nb = np.asarray(table.neighbors, dtype=np.int64)
-        neighbors.append(np.where(nb >= 0, nb + patch_base, -1))
-        point_base += len(points[-1])
-        patch_base += len(first[-1])
-    return Patches(np.concatenate(points), np.concatenate(first).astype(np.uint32), np.concatenate(levels),
-                   np.concatenate(neighbors).astype(np.int32))
+        for name, value in (("points", table.points), ("first", np.asarray(table.first, np.int64) + point_base),
+                            ("levels", table.levels), ("face", np.asarray(table.face, np.int64) + face_base),
+                            ("domain", table.domain), ("rotation", table.rotation),
+                            ("neighbors", np.where(nb >= 0, nb + patch_base, -1))):
+            parts[name].append(value)
+        point_base += len(table.points)
+        patch_base += len(table.first)
+        face_base += int(np.max(table.face, initial=-1)) + 1
+    return PatchTable(**{name: np.concatenate(arrays) for name, arrays in parts.items()})
 
 
 # Crack-free tessellation of the leaves (section 5.3) ------------------------------------------------
@@ -366,45 +357,48 @@ SIDE_MATCH = 1e-2
 # Patches may be refined further than their neighbours (the table's ``domain``): a side can be a piece of
 # a neighbour's side. Sides are sampled at 2^SIDE_LOG + 1 points; pieces down to 2^-SIDE_LOG are found.
 SIDE_LOG = 4
+SIDE_CHUNK = 1 << 16       # side pairs compared at once (~27 MiB of sample gaps)
 
 
-def matching_sides(vox: Voxelization) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Pairs of patch sides that are one curve: side ``a`` (4 patch + side) is the piece of side ``b``
-    from t = ``start`` / 2^SIDE_LOG, running ``span`` / 2^SIDE_LOG (negative: against b's direction) as a's
-    parameter goes 0 -> 1. Found geometrically: a's end corners lie on b's samples (within SIDE_MATCH
-    voxels) and so do a's samples that fall on b's (every sample when the sides are equal, every other
-    one for a half, ...); ``span`` is a power of two, positive or negative. Returned int64 arrays."""
+def side_samples(vox: Voxelization) -> np.ndarray:
+    """(4 P, 2^SIDE_LOG + 1, 3) float64: each patch side (4 patch + side) evaluated at evenly spaced t."""
     npatch, count = vox.npatches, (1 << SIDE_LOG) + 1
     t = np.linspace(0.0, 1.0, count)
     side_u = np.stack([t, np.ones(count), t, np.zeros(count)])             # (4, count): side s at sample j
     side_v = np.stack([np.zeros(count), t, np.ones(count), t])
     patch = np.repeat(np.arange(npatch), 4 * count)
     points = vox.evaluate(patch, np.tile(side_u.ravel(), npatch), np.tile(side_v.ravel(), npatch))
-    points = points.astype(np.float64).reshape(4 * npatch, count, 3)
+    return points.astype(np.float64).reshape(4 * npatch, count, 3)
+
+
+def matching_sides(vox: Voxelization) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Pairs of patch sides that are one curve: side ``a`` (4 patch + side) is the piece of side ``b``
+    from t = ``start`` / 2^SIDE_LOG, running ``span`` / 2^SIDE_LOG (negative: against b's direction) as a's
+    parameter goes 0 -> 1. Returned int64 arrays.
+
+    Which patch a side meets is the table's (``neighbors``: topology, subdivision/patches.py; where the
+    patch across is coarser, the coarser one, whose side holds a's as a piece); which of that patch's
+    sides, and which piece of it, the sides' samples say: a's end corners lie on b's samples (within
+    SIDE_MATCH voxels, the nearest sample each) and so do a's samples that fall on b's (every sample when
+    the sides are equal, every other one for a half, ...); ``span`` is a power of two, positive or
+    negative."""
+    count = (1 << SIDE_LOG) + 1
+    points = side_samples(vox)
     tol = SIDE_MATCH * vox.voxel_size
-    tree = cKDTree(points.reshape(-1, 3))
-    ends = []
-    for j in (0, count - 1):                       # (side a, side b, sample of b) for a's start, a's end
-        hits = cKDTree(points[:, j]).sparse_distance_matrix(tree, tol, output_type="ndarray")
-        hit = np.stack([hits["i"], hits["j"] // count, hits["j"] % count], axis=1).astype(np.int64)
-        # short sides have several samples within tol of a point: keep the nearest per (a, b)
-        order = np.lexsort((hits["v"], hit[:, 1], hit[:, 0]))
-        hit = hit[order]
-        first = np.ones(len(hit), bool)
-        first[1:] = np.any(hit[1:, :2] != hit[:-1, :2], axis=1)
-        ends.append(hit[first])
-    start, end = ends
-    # join a's start and end hits on (a, b)
-    key_s, key_e = start[:, 0] * 4 * npatch + start[:, 1], end[:, 0] * 4 * npatch + end[:, 1]
-    if len(key_e) == 0:
-        return (np.zeros(0, np.int64),) * 4
-    order = np.argsort(key_e, kind="stable")
-    at = np.clip(np.searchsorted(key_e[order], key_s), 0, len(key_e) - 1)
-    found = key_e[order][at] == key_s
-    a, b, j0 = start[found, 0], start[found, 1], start[found, 2]
-    j1 = end[order][at][found, 2]
+    across = np.asarray(vox.neighbors, dtype=np.int64).reshape(-1)
+    sides = np.flatnonzero(across >= 0)
+    a = np.repeat(sides, 4)                                                # each side against the 4 across
+    b = 4 * across[a] + np.tile(np.arange(4), len(sides))
+    j0, j1 = np.zeros(len(a), np.int64), np.zeros(len(a), np.int64)
+    near0, near1 = np.zeros(len(a), bool), np.zeros(len(a), bool)
+    for lo in range(0, len(a), SIDE_CHUNK):        # b's sample nearest to a's start, to a's end
+        part = slice(lo, lo + SIDE_CHUNK)
+        for j, nearest, near in ((0, j0, near0), (count - 1, j1, near1)):
+            gap = np.linalg.norm(points[b[part]] - points[a[part], j][:, None], axis=2)
+            nearest[part] = np.argmin(gap, axis=1)
+            near[part] = gap[np.arange(len(gap)), nearest[part]] <= tol
     span = j1 - j0
-    power = (span != 0) & ((np.abs(span) & (np.abs(span) - 1)) == 0) & (a != b)
+    power = near0 & near1 & (span != 0) & ((np.abs(span) & (np.abs(span) - 1)) == 0) & (a != b)
     a, b, j0, span = a[power], b[power], j0[power], span[power]
     # a's samples that land on b's samples must coincide with them
     i = np.arange(count)
@@ -447,8 +441,7 @@ def tessellate(vox: Voxelization) -> LeafMesh:
     Points on a leaf's side are found exactly in integer parameter coordinates: inside a patch directly,
     across patches through the side pieces that are one curve (:func:`matching_sides`: equal sides
     either way round, or a side that is a dyadic piece of a larger neighbour's side), which map a side
-    parameter to the neighbour's. Found from the surface itself, so the table's ``neighbors`` are not
-    needed (tests compare the two). Every evaluation of one surface point (a corner shared by leaves of
+    parameter to the neighbour's. Every evaluation of one surface point (a corner shared by leaves of
     several patches) becomes one vertex, at the position of the lowest-numbered sample. Raises
     ValueError when the parameter keys (patches x (2^(depth + SIDE_LOG) + 1)^2) overflow 62 bits.
     """

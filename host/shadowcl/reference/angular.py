@@ -1,4 +1,5 @@
-"""Float64 reference of the angular method: ridge edges, the span table, lookups, the paper's pairing
+"""Float64 reference of the angular method: ridge edges, the span table (a face's span over each whole
+row band it meets), lookups (a face record's hit must lie in the triangle), the paper's pairing
 of section 4 for one loop, and the loop table as ``table="loops"`` builds it (:func:`loop_table`: pairs
 per lit region, cut at concave creases, pole crossings). Written from the paper; never calls
 ``shadowcl.angular``.
@@ -9,12 +10,16 @@ row half-planes through the X axis at theta = atan2(Y, -Z), key s = X / |P|; a d
 from +Z, rows are planes Y = const, s = X.
 
 Tolerances (float32 device against float64 here):
-- Row membership of a (face, row) pair is exact except when the row centre lies within ``ROW_TIE`` (in
-  row units) of the end of the face's row-coordinate range: the device's atan2 and division round.
+- Row membership of a (face, row) pair is exact except when a row boundary (the loop table: a row centre)
+  lies within ``ROW_TIE`` (in row units) of the end of the face's padded row-coordinate range: the device's
+  atan2 and division round.
 - ``s`` of a span end: the device cuts the face in float32 from float32 corners rotated on the host;
-  the crossing point carries a few float32 roundings of the coordinates (~1e-7 relative) amplified by
-  1 / sin(angle between edge and row plane); ``S_TOL`` = 2e-4 holds for edges more than ~0.1 degree off
+  a cut point carries a few float32 roundings of the coordinates (~1e-7 relative) amplified by
+  1 / sin(angle between edge and cutting plane); ``S_TOL`` = 2e-4 holds for edges more than ~0.1 degree off
   the plane, and spans from flatter cuts are compared where they agree (see the tests).
+- A face record's hit: the device's edge functions in float32 decide points within ~1e-6 of the face's
+  size from an edge either way: :func:`classify`'s ``grow`` bounds that band (the tests call points whose
+  answer changes with grow = +-1e-5 ties).
 """
 
 from __future__ import annotations
@@ -56,15 +61,20 @@ def row_coordinate(local, point: bool) -> np.ndarray:
     return np.arctan2(local[..., 1], -local[..., 2]) if point else local[..., 1]
 
 
-def face_rows(corners, t0, dt, rows, full_circle, point) -> list[np.ndarray]:
-    """Rows (ascending) whose centre lies in the row-coordinate range of each face (corners (F, 3, 3)),
-    every row for a point-light face whose YZ projection surrounds the pole, none for an edge-on face."""
-    out = []
+def face_rows(corners, t0, dt, rows, full_circle, point, pad_t) -> tuple[list[np.ndarray], np.ndarray]:
+    """(rows, pad) per face (corners (F, 3, 3)): the rows (ascending) whose band [t0 + k dt, t0 + (k + 1) dt]
+    meets the face's row-coordinate range widened by its pad (``pad_t``; point light: times max(1, r / rho)
+    over the corners, rho the distance from the pole axis, every row when rho <= r pad_t or when the widened
+    range covers the circle); every row for a point-light face whose YZ projection surrounds the pole, none
+    for an edge-on face."""
+    out, pads = [], []
     for tri in np.asarray(corners, dtype=np.float64):
         n = np.cross(tri[1] - tri[0], tri[2] - tri[0])
         side = -n @ tri[0] if point else n[2]
+        pad = pad_t
         if side == 0:
             out.append(np.zeros(0, dtype=np.int64))
+            pads.append(pad)
             continue
         t = row_coordinate(tri, point)
         if point:
@@ -72,59 +82,81 @@ def face_rows(corners, t0, dt, rows, full_circle, point) -> list[np.ndarray]:
             lo, hi = t[0] + rel.min(), t[0] + rel.max()
             u, v = tri[:, 1], -tri[:, 2]
             e = np.array([u[i] * v[(i + 1) % 3] - v[i] * u[(i + 1) % 3] for i in range(3)])
-            if np.all(e >= 0) or np.all(e <= 0):
+            rho, r = np.hypot(u, v).min(), np.linalg.norm(tri, axis=1).max()
+            pad = pad_t * max(1.0, r / rho) if rho > r * pad_t else 2 * np.pi
+            pads.append(pad)
+            if np.all(e >= 0) or np.all(e <= 0) or hi - lo + 2 * pad >= 2 * np.pi:
                 out.append(np.arange(rows))
                 continue
         else:
             lo, hi = t.min(), t.max()
-        k = np.arange(np.ceil((lo - t0) / dt - 0.5), np.floor((hi - t0) / dt - 0.5) + 1).astype(np.int64)
+            pads.append(pad)
+        k = np.arange(np.floor((lo - pad - t0) / dt), np.floor((hi + pad - t0) / dt) + 1).astype(np.int64)
         k = np.unique(k % rows) if full_circle else k[(k >= 0) & (k < rows)]
         out.append(k)
+    return out, np.array(pads)
+
+
+def _clip(poly, g) -> list:
+    """The convex polygon ``poly`` (list of (3,) points) where the linear function ``g`` is >= 0."""
+    out = []
+    for i, p in enumerate(poly):
+        q = poly[(i + 1) % len(poly)]
+        gp, gq = g(p), g(q)
+        if gp >= 0:
+            out.append(p)
+        if (gp >= 0) != (gq >= 0):
+            out.append(p + gp / (gp - gq) * (q - p))
     return out
 
 
-def span(tri, tk, point) -> tuple[float, float]:
-    """[s_lo, s_hi] of the cut of face ``tri`` by row ``tk``'s half-plane (point) or plane (directional);
-    (2, -2) when the cut misses."""
-    tri = np.asarray(tri, dtype=np.float64)
+def _segment_s_range(a, b) -> tuple[float, float]:
+    """min and max of s = x / |p| along the segment a -> b (point light): at the ends or where ds/dt = 0,
+    which for p = a + t e is linear in t: t (e_x a.e - a_x |e|^2) = a_x a.e - e_x |a|^2."""
+    e = b - a
+    cand = [a, b]
+    den = e[0] * (a @ e) - a[0] * (e @ e)
+    if den != 0:
+        t = (a[0] * (a @ e) - e[0] * (a @ a)) / den
+        if 0 < t < 1:
+            cand.append(a + t * e)
+    s = [p[0] / np.linalg.norm(p) if np.linalg.norm(p) > 0 else 0.0 for p in cand]
+    return min(s), max(s)
+
+
+def band_span(tri, ta, tb, point, pad_s) -> tuple[float, float]:
+    """[s_lo, s_hi] of the directions of face ``tri`` whose row coordinate lies in [ta, tb] (point light: the
+    face cut to the wedge ta <= theta <= tb, uncut when the band is a half-turn or wider; directional: the
+    slab ta <= Y <= tb), widened by ``pad_s``; (2, -2) when the face misses the band."""
+    poly = [np.asarray(p, dtype=np.float64) for p in tri]
     if point:
-        m, w = np.array([0.0, np.cos(tk), np.sin(tk)]), np.array([0.0, np.sin(tk), -np.cos(tk)])
-        sd = tri @ m
-    else:
-        sd = tri[:, 1] - tk
-    cuts = []
-    for i in range(3):
-        j = (i + 1) % 3
-        if (sd[i] > 0) != (sd[j] > 0):
-            c = tri[i] + sd[i] / (sd[i] - sd[j]) * (tri[j] - tri[i])
-            cuts.append((c[0], c @ w) if point else (c[0], 1.0))
-    if len(cuts) < 2:
-        return 2.0, -2.0
-    (a0, b0), (a1, b1) = cuts[:2]
-    if point:
-        if b0 < 0 and b1 < 0:
+        if tb - ta < np.pi:
+            poly = _clip(poly, lambda p: np.cos(ta) * p[1] + np.sin(ta) * p[2])        # sin(theta - ta) >= 0
+            poly = _clip(poly, lambda p: -np.cos(tb) * p[1] - np.sin(tb) * p[2])       # sin(tb - theta) >= 0
+        if len(poly) < 3:
             return 2.0, -2.0
-        if b0 < 0 or b1 < 0:                                   # cut at the pole axis
-            if b0 < 0:
-                (a0, b0), (a1, b1) = (a1, b1), (a0, b0)
-            a1, b1 = a0 + b0 / (b0 - b1) * (a1 - a0), 0.0
-        s0, s1 = a0 / np.hypot(a0, b0), a1 / np.hypot(a1, b1)
+        ranges = [_segment_s_range(poly[i], poly[(i + 1) % len(poly)]) for i in range(len(poly))]
+        lo, hi = min(r[0] for r in ranges), max(r[1] for r in ranges)
     else:
-        s0, s1 = a0, a1
-    return min(s0, s1), max(s0, s1)
+        poly = _clip(_clip(poly, lambda p: p[1] - ta), lambda p: tb - p[1])
+        if len(poly) < 2:
+            return 2.0, -2.0
+        lo, hi = min(p[0] for p in poly), max(p[0] for p in poly)
+    return lo - pad_s, hi + pad_s
 
 
-def table(local_vertices, faces, table_faces, t0, dt, rows, full_circle, point) -> dict:
+def table(local_vertices, faces, table_faces, t0, dt, rows, full_circle, point, pad_t, pad_s) -> dict:
     """The span table: arrays ``row``, ``face``, ``s_lo``, ``s_hi`` (float64), sorted by (row, s_lo, face),
-    and ``plane`` (F, 4) per face of ``faces`` (n, d with n.x = d, the light on the positive side)."""
+    and per face of ``faces``: ``plane`` (F, 4) (n, d with n.x = d, the light on the positive side) and
+    ``triangle`` (F, 3, 3), its corners, which a lookup's hit must lie in."""
     v = np.asarray(local_vertices, dtype=np.float64)
     faces = np.asarray(faces)
     corners = v[faces[np.asarray(table_faces, dtype=np.int64)]]
-    rows_of = face_rows(corners, t0, dt, rows, full_circle, point)
+    rows_of, pads = face_rows(corners, t0, dt, rows, full_circle, point, pad_t)
     rec = []
-    for f, tri, ks in zip(table_faces, corners, rows_of):
+    for f, tri, ks, pad in zip(table_faces, corners, rows_of, pads):
         for k in ks:
-            lo, hi = span(tri, t0 + (k + 0.5) * dt, point)
+            lo, hi = band_span(tri, t0 + k * dt - pad, t0 + (k + 1) * dt + pad, point, pad_s)
             rec.append((k, f, lo, hi))
     rec = np.array(rec, dtype=np.float64).reshape(-1, 4)
     order = np.lexsort((rec[:, 1], rec[:, 2], rec[:, 0]))
@@ -135,7 +167,7 @@ def table(local_vertices, faces, table_faces, t0, dt, rows, full_circle, point) 
     side = -d if point else n[:, 2]
     flip = np.where(side < 0, -1.0, 1.0)
     return dict(row=rec[:, 0].astype(np.int64), face=rec[:, 1].astype(np.int64), s_lo=rec[:, 2], s_hi=rec[:, 3],
-                plane=np.c_[n * flip[:, None], d * flip])
+                plane=np.c_[n * flip[:, None], d * flip], triangle=allc)
 
 
 def receiver_keys(points, t0, dt, rows, full_circle, point):
@@ -151,9 +183,22 @@ def receiver_keys(points, t0, dt, rows, full_circle, point):
     return k, s, dist
 
 
-def classify(points, normals, tab, t0, dt, rows, full_circle, point, eps) -> np.ndarray:
+def _inside(tri, x, grow) -> bool:
+    """Point ``x`` of the triangle's plane lies in triangle ``tri`` (edges moved out by about ``grow`` times
+    the triangle's size; negative: in)."""
+    n = np.cross(tri[1] - tri[0], tri[2] - tri[0])
+    size = np.linalg.norm(n)
+    if size == 0:
+        return False
+    sides = [np.cross(tri[(i + 1) % 3] - tri[i], x - tri[i]) @ n / size for i in range(3)]   # edge length x distance
+    return all(s >= -grow * size for s in sides)
+
+
+def classify(points, normals, tab, t0, dt, rows, full_circle, point, eps, grow=0.0) -> np.ndarray:
     """Bool (N,): a receiver is shadowed when a face with a span of its row containing its s meets its
-    segment to the light further than eps from it (normals: back-facing is shadowed, offset eps)."""
+    segment to the light further than eps from it, inside the triangle (``tab["triangle"]``; ``grow``
+    moves its edges out, for ties; a table without triangles, the loop table's chords, uses the plane)
+    (normals: back-facing is shadowed, offset eps)."""
     p = np.array(points, dtype=np.float64)
     shadow = np.zeros(len(p), dtype=bool)
     if normals is not None:
@@ -162,12 +207,16 @@ def classify(points, normals, tab, t0, dt, rows, full_circle, point, eps) -> np.
         shadow |= back
         p = p + eps * nrm
     k, s, dist = receiver_keys(p, t0, dt, rows, full_circle, point)
+    triangles = tab.get("triangle")
     for i in np.flatnonzero(~shadow & (k >= 0)):
         sel = (tab["row"] == k[i]) & (tab["s_lo"] <= s[i]) & (s[i] <= tab["s_hi"])
         for f in tab["face"][sel]:
             n, d = tab["plane"][f, :3], tab["plane"][f, 3]
             q = n @ p[i]
             hit = (q < d and (1 - d / q) * dist[i] > eps) if point else (d - q > eps * n[2])
+            if hit and triangles is not None:
+                x = p[i] * (d / q) if point else p[i] + np.array([0.0, 0.0, (d - q) / n[2]])
+                hit = _inside(triangles[f], x, grow)
             if hit:
                 shadow[i] = True
                 break

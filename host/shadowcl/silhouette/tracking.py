@@ -1,5 +1,5 @@
-"""Silhouettes of a moving light: the paper's tracking walks (sections III.B-C) and Markosian's randomized
-method, on the host and as device walks, behind :class:`SilhouetteTracker`."""
+"""Silhouettes of a moving light: the paper's tracking walks (sections III.B-C, as device walks) and
+Markosian's randomized method (grown on the host), behind :class:`SilhouetteTracker`."""
 
 from __future__ import annotations
 
@@ -102,28 +102,29 @@ class SilhouetteTracker:
       missed by every sample are lost until a later sample hits them (the paper trades accuracy for
       speed); found edges are always real silhouette edges.
 
-    Where the work runs: tracking's ``walks="device"`` (the default) runs its tests and walks in
-    kernels (``track_previous``, ``seed_edges``, ``complete_loops``: one work-item per candidate, last
-    frame's edges kept on the device); ``walks="host"`` runs the same walks in NumPy, all walkers a
-    step at a time; both give the same edges (tested). The randomized method grows on the host in
-    NumPy rounds: its growth tests every edge at a chain's vertices, so it also finds loops that
-    touch a found one at a vertex (a device version growing by the loop walk instead lost 2-6 % of
-    the recall on the bunny and ogre, 60 frames at 3 degrees, fractions 0.02 and 0.1). On the host,
-    faces are tested by :func:`host_facing` as the walks reach them, except that a batch of at least ``device_batch`` new faces (default ``1000 + F / 20``, the
-    measured break-even) is done by one device pass over every face. Every facing, on host or device,
-    is the kernel's float32 arithmetic, so tracking and random never report an edge the brute force
-    would not (precision 1).
+    Where the work runs: tracking runs its tests and walks in kernels (``track_previous``,
+    ``seed_edges``, ``complete_loops``: one work-item per candidate, last frame's edges kept on the
+    device). Their NumPy twin, all walkers a step at a time, is their reference
+    (``shadowcl.reference.silhouette.tracking_frame``; as a tracker option it was 1.05-9.9x slower on
+    every model and path of bench/silhouettes.py). The randomized method grows
+    on the host in NumPy rounds: its growth tests every edge at a chain's vertices, so it also finds
+    loops that touch a found one at a vertex (a device version growing by the loop walk instead lost
+    2-6 % of the recall on the bunny and ogre, 60 frames at 3 degrees, fractions 0.02 and 0.1). Its
+    faces are tested on the host by :func:`host_facing` as the growth reaches them, except that a batch
+    of at least ``device_batch`` new faces (default ``1000 + F / 20``, the measured break-even) is done
+    by one device pass over every face. Every facing, on host or device, is the kernel's float32
+    arithmetic, so tracking and random never report an edge the brute force would not (precision 1).
 
     ``update(light)`` returns a :class:`Silhouette` (codes 0 for edges not found; ``facing`` computed
     on use); ``stats`` describes the last update (``fallback``, ``stale``, ``lost_walks``,
-    ``faces_tested`` (None for device walks), ``edges_found``; ``rounds`` and ``sampled`` for random);
-    ``reset()`` forgets the history. Tracking refuses non-manifold and inconsistently wound meshes (its loop walk follows the winding), random non-manifold ones (``ValueError``); brute force
+    ``faces_tested`` (None for tracked frames: the device's walks do not count them), ``edges_found``;
+    ``rounds`` and ``sampled`` for random); ``reset()`` forgets the history. Tracking refuses non-manifold and inconsistently wound meshes (its loop walk follows the winding), random non-manifold ones (``ValueError``); brute force
     reports non-manifold edges with code :data:`NONMANIFOLD`.
     """
 
     def __init__(self, device, mesh_or_adjacency, method: str = "brute", fraction: float = 0.02, seed: int = 0,
                  *, concave_angle: float = 0.0, max_walk: int = 16, max_stale: float = 0.5,
-                 max_lost: float = 0.5, device_batch: "int | None" = None, walks: str = "device"):
+                 max_lost: float = 0.5, device_batch: "int | None" = None):
         self.device = get_device(device)
         adjacency = mesh_or_adjacency
         if isinstance(adjacency, Mesh):
@@ -132,9 +133,6 @@ class SilhouetteTracker:
             raise TypeError(f"mesh_or_adjacency: expected a Mesh or an EdgeAdjacency, got {type(adjacency).__name__}")
         if method not in TRACKER_METHODS:
             raise ValueError(f"method: expected one of {TRACKER_METHODS}, got {method!r}")
-        if walks not in ("device", "host"):
-            raise ValueError(f"walks: expected 'device' or 'host', got {walks!r}")
-        self.walks = walks
         fraction = positive_float("fraction", fraction)
         if fraction > 1:
             raise ValueError(f"fraction: must be at most 1, got {fraction!r}")
@@ -168,7 +166,7 @@ class SilhouetteTracker:
         self._vertex_slot = np.zeros(len(adjacency.vertices), dtype=np.int64)
         self._frame = 0
         self._concave = self._concave_edges() if method == "tracking" else np.zeros(0, np.int64)
-        self._on_device = _DeviceWalks(self) if method == "tracking" and walks == "device" else None
+        self._on_device = _DeviceWalks(self) if method == "tracking" else None
         self.reset()
 
     @property
@@ -202,7 +200,7 @@ class SilhouetteTracker:
             # Nothing to track from: a loop born away from the border and concave edges would be lost.
             found, fallback = None, True
         else:
-            found = self._on_device.frame() if self._on_device else self._tracking_frame()
+            found = self._on_device.frame()
             fallback = found is None
         if found is None:                            # first tracking frame, no history, or a detected jump
             silhouette = silhouette_edges(self.device, self.adjacency, light)
@@ -256,88 +254,6 @@ class SilhouetteTracker:
         """Two-face edges folding inwards by at least ``concave_angle`` degrees (dihedral >= 180 + angle)."""
         return concave_edges(self.adjacency, min_degrees=self.concave_angle)
 
-    # Tracking ---------------------------------------------------------------------------------------
-    def _tracking_frame(self) -> "np.ndarray | None":
-        h, previous = self.halves, self._previous
-        twin = h.twin[previous]
-        extra = np.r_[self.adjacency.border_edges, self._concave]
-        self._lit(np.r_[previous, twin, h.edge_halves[extra].reshape(-1)] // 3, batch=True)
-        lit_here, lit_there = self._lit(previous // 3), self._lit(twin // 3)
-        seeds = [previous[lit_here & ~lit_there], twin[~lit_here & lit_there]]
-        away, into = lit_here & lit_there, ~lit_here & ~lit_there
-        stale = float(np.mean(away | into)) if len(previous) else 0.0
-        self.stats["stale"] = stale
-        if stale > self.max_stale:
-            return None
-        # III.B: walk from the face that turned, away from the other one.
-        starts = np.r_[twin[away], previous[into]]
-        walked, lost = self._find_edges_by_walk(starts // 3, starts % 3, np.r_[np.ones(away.sum(), bool),
-                                                                               np.zeros(into.sum(), bool)])
-        self.stats["lost_walks"] = lost
-        if len(starts) and lost > self.max_lost * len(starts):
-            return None
-        seeds = np.concatenate(seeds + [walked, self._test_edges(extra)])
-        found = self._complete_loops(seeds)
-        if len(found) < (1 - self.max_stale) * len(previous):
-            return None
-        return found
-
-    def _find_edges_by_walk(self, faces, back, lit_walk):
-        """Section III.B's ``find_edge_by_walk`` for many walkers at once. Walker i stands on
-        ``faces[i]``, entered through its edge ``back[i]``; a light-facing walk (``lit_walk``) crosses
-        light-facing faces until a left or right neighbour faces away (or is missing), the other walk
-        crosses faces facing away until a neighbour faces the light. Steps go left and right in turn; a
-        missing neighbour is a wall. Returns (light-facing half-edges of the silhouettes found, number
-        of walkers lost: out of steps or walled in)."""
-        twin, found, lost = self.halves.twin, [], 0
-        step_left = np.ones(len(faces), dtype=bool)
-        for _ in range(self.max_walk):
-            if not len(faces):
-                break
-            left, right = 3 * faces + (back + 1) % 3, 3 * faces + (back + 2) % 3
-            left_twin, right_twin = twin[left], twin[right]
-            lit_left, lit_right = self._lit(left_twin // 3), self._lit(right_twin // 3)
-            hit_left = np.where(lit_walk, ~lit_left, lit_left)
-            hit_right = np.where(lit_walk, ~lit_right, lit_right)
-            done = hit_left | hit_right
-            found.append(np.where(hit_left, np.where(lit_walk, left, left_twin),
-                                  np.where(lit_walk, right, right_twin))[done])
-            go_left = np.where(step_left, left_twin >= 0, right_twin < 0)
-            walled = (left_twin < 0) & (right_twin < 0) & ~done
-            lost += int(walled.sum())
-            going = ~done & ~walled
-            step = np.where(go_left, left_twin, right_twin)[going]
-            faces, back, lit_walk, step_left = step // 3, step % 3, lit_walk[going], ~step_left[going]
-        return np.concatenate(found + [np.zeros(0, np.int64)]), lost + len(faces)
-
-    def _complete_loops(self, seeds: np.ndarray) -> np.ndarray:
-        """Section III.C: from each seed (a light-facing half-edge of a silhouette edge) turn around its
-        tail vertex through light-facing faces; the first edge whose other face faces away (or is
-        missing) is the next silhouette edge, whose other vertex is turned around next; stop at an
-        edge already found. All walkers step together; returns every loop edge's light-facing half."""
-        h = self.halves
-        seeds = seeds[_distinct(h.edge[seeds], self._edge_slot, positions=True)]
-        self._edge_stamp[h.edge[seeds]] = self._frame
-        found, current, pivot = [seeds], seeds, h.tails[seeds]
-        for _ in range(6 * len(h.edge_halves) + 6):      # a loop's faces are each entered at most thrice
-            if not len(current):
-                break
-            faces, k = current // 3, current % 3
-            # The other edge of this face at the pivot: it ends there or starts there.
-            side = 3 * faces + np.where(h.tails[current] == pivot, (k + 2) % 3, (k + 1) % 3)
-            across = h.twin[side]
-            turn = self._lit(across // 3)
-            edge = h.edge[side]
-            new = ~turn & (self._edge_stamp[edge] != self._frame)
-            self._edge_stamp[edge[new]] = self._frame
-            found.append(side[new])
-            far = np.where(h.tails[side] == pivot, h.heads[side], h.tails[side])
-            current = np.r_[across[turn], side[new]]
-            pivot = np.r_[pivot[turn], far[new]]
-        else:
-            raise RuntimeError("silhouette loop completion did not end (an inconsistent adjacency table)")
-        return np.concatenate(found)
-
     # Randomized -------------------------------------------------------------------------------------
     def _sample(self) -> np.ndarray:
         """This frame's random ``fraction`` of the edges (with repeats)."""
@@ -374,8 +290,7 @@ def _distinct(items: np.ndarray, slot: np.ndarray, positions: bool = False) -> n
 
 class _DeviceWalks:
     """Tracking's walks on the device (kernels/silhouette.cl: track_previous, seed_edges,
-    complete_loops): the same seeds, walks and loops as the host's ``_tracking_frame``, one work-item
-    per candidate, last frame's edges kept on the device between frames."""
+    complete_loops), one work-item per candidate, last frame's edges kept on the device between frames."""
 
     def __init__(self, tracker: SilhouetteTracker):
         self.tracker = tracker

@@ -3,6 +3,7 @@ once or twice where needed), their control points, Ptex parameter domains and si
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -27,11 +28,13 @@ class PatchTable:
     - ``face`` (n,) int32 control face; ``domain`` (n, 4) float64 (u0, v0, du, dv) in the face's
       parameters (for n-gons, u in [0, n]); ``rotation`` (n,) uint8: patch corner (0, 0) sits at domain
       corner ``rotation`` (corners (u0, v0), (u1, v0), (u1, v1), (u0, v1)), the patch's u axis towards
-      the next corner.
+      the next corner. (A table made from a control grid, ``testing.grid_patch_table``, has a face per
+      patch and unit domains; one merged from several, ``voxelize.merge_tables``, numbers faces on.)
     - ``neighbors`` (n, 4) int32: the patch across side 0 (v = 0), 1 (u = 1), 2 (v = 1), 3 (u = 0), -1 on
       a boundary; where the neighbour is refined further, the one touching the side's corner at the
       start of the side in the neighbour's own order.
-    - ``points_dev``, ``first_dev``, ``levels_dev``: device copies (on the device the table was built for).
+
+    The arrays are read-only; :meth:`buffers` gives the device copies the kernels read.
     """
 
     points: np.ndarray
@@ -41,26 +44,32 @@ class PatchTable:
     domain: np.ndarray
     rotation: np.ndarray
     neighbors: np.ndarray
-    points_dev: object = field(repr=False)
-    first_dev: object = field(repr=False)
-    levels_dev: object = field(repr=False)
+    _buffers: weakref.WeakKeyDictionary = field(default_factory=weakref.WeakKeyDictionary, init=False, repr=False)
+
+    def __post_init__(self):
+        for name, dtype in (("points", np.float32), ("first", np.uint32), ("levels", np.uint32), ("face", np.int32),
+                            ("domain", np.float64), ("rotation", np.uint8), ("neighbors", np.int32)):
+            array = np.array(getattr(self, name), dtype=dtype, order="C")      # a copy: the table owns its arrays
+            array.flags.writeable = False
+            object.__setattr__(self, name, array)
 
     def __len__(self) -> int:
         return len(self.first)
 
+    def buffers(self, device) -> tuple:
+        """(points, first, levels) on ``device``, uploaded once per device."""
+        found = self._buffers.get(device)
+        if found is None:
+            found = self._buffers[device] = tuple(device.to_device(a) for a in (self.points, self.first, self.levels))
+        return found
 
-@dataclass
-class _Patches:
-    """Host-side (float64) patches of a surface, independent of any device."""
 
-    points: np.ndarray  # (P, 3) float64
+@dataclass(frozen=True)
+class _Lookup:
+    """What evaluating a surface by control-face parameters needs beside its table (host, float64)."""
+
+    points: np.ndarray  # (P, 3) float64: the table's control points before rounding (host derivatives near EVs)
     ev_normals: np.ndarray  # (n, 3) float64 unit limit normal at a Stam patch's EV; NaN where none is known
-    first: np.ndarray
-    levels: np.ndarray
-    face: np.ndarray
-    domain: np.ndarray
-    rotation: np.ndarray
-    neighbors: np.ndarray
     cell_start: np.ndarray  # per control face: start in `cells`
     cell_res: np.ndarray  # per control face: cells per unit of u and of v
     cells: np.ndarray  # patch id per cell, row-major (v rows, u columns)
@@ -79,7 +88,8 @@ def _ptex_sizes(sizes: np.ndarray) -> np.ndarray:
     return np.where(sizes == 4, 1, sizes)
 
 
-def _build_patches(vertices: np.ndarray, faces: list[np.ndarray]) -> _Patches:
+def _build_patches(vertices: np.ndarray, faces: list[np.ndarray]) -> tuple[PatchTable, _Lookup]:
+    """The patch table of a checked control mesh and its host lookup."""
     points = [vertices]
     topos = [_Topology.from_faces(faces, len(vertices))]
     topos[0].check_manifold_vertices()
@@ -130,7 +140,7 @@ def _build_patches(vertices: np.ndarray, faces: list[np.ndarray]) -> _Patches:
     return _assemble(points, topos, records, t0)
 
 
-def _assemble(points, topos, records, t0: _Topology) -> _Patches:
+def _assemble(points, topos, records, t0: _Topology) -> tuple[PatchTable, _Lookup]:
     n = len(records)
     nets: list = [None] * n
     levels = np.zeros(n, dtype=np.uint32)
@@ -181,11 +191,9 @@ def _assemble(points, topos, records, t0: _Topology) -> _Patches:
         for j in range(j0, j1):
             cells[cell_start[f] + j * width + i0:cell_start[f] + j * width + i1] = p
     assert (cells >= 0).all(), "subdivision: patch domains do not cover every face"
-    return _Patches(
-        points=np.concatenate(nets), ev_normals=ev_normals, first=first, levels=levels, face=face, domain=domain,
-        rotation=rotation,
-        neighbors=_neighbors(topos, records), cell_start=cell_start, cell_res=res, cells=cells,
-    )
+    points = np.concatenate(nets)
+    table = PatchTable(points, first, levels, face, domain, rotation, _neighbors(topos, records))
+    return table, _Lookup(points, ev_normals, cell_start, res, cells)
 
 
 def _neighbors(topos, records) -> np.ndarray:

@@ -4,13 +4,12 @@ limit normals, tessellation and voxelization of one control mesh."""
 from __future__ import annotations
 
 import os
-import weakref
 from functools import cached_property
 from pathlib import Path
 
 import numpy as np
 
-from ..checks import finite_array, positive_int
+from ..checks import finite_array, integer_array, positive_int, vertex_indices
 from ..device import get_device
 from ..geometry import Mesh
 from ..meshio import read_polygons
@@ -38,14 +37,7 @@ def _checked_uv(u, v) -> tuple[np.ndarray, np.ndarray]:
 def _indices(name: str, value, shape: tuple, count: int) -> np.ndarray:
     """``value`` as int64 indices below ``count``: a scalar (broadcast to ``shape``) or of ``shape``; an
     empty sequence of any dtype is no indices."""
-    try:
-        array = np.asarray(value)
-    except Exception as error:
-        raise TypeError(f"{name}: cannot be read as indices ({error})") from None
-    if array.size == 0 and array.ndim == 1:
-        array = array.astype(np.int64)
-    if array.dtype == bool or not np.issubdtype(array.dtype, np.integer):
-        raise TypeError(f"{name}: expected integer indices, got dtype {array.dtype}")
+    array = integer_array(name, value, empty=True)
     array = np.broadcast_to(array, shape) if array.ndim == 0 else array
     if array.shape != shape:
         raise ValueError(f"{name}: expected a scalar or shape {shape}, got {array.shape}")
@@ -66,20 +58,14 @@ def _checked_faces(faces, n_vertices: int) -> list[np.ndarray]:
         raise ValueError("faces: the control mesh is empty (no faces)")
     out = []
     for i, row in enumerate(rows):
-        try:
-            array = np.asarray(row)
-        except Exception as error:
-            raise TypeError(f"faces: face {i} cannot be read as indices ({error})") from None
-        if array.dtype == bool or not np.issubdtype(array.dtype, np.integer):
-            raise TypeError(f"faces: face {i} must hold integer vertex indices, got dtype {array.dtype}")
+        array = integer_array(f"faces: face {i}", row)
         if array.ndim != 1 or len(array) < 3:
             raise ValueError(f"faces: face {i} must list at least 3 vertex indices, got shape {array.shape}")
-        if array.min() < 0 or array.max() >= n_vertices:
-            bad = int(array.min() if array.min() < 0 else array.max())
-            raise ValueError(f"faces: face {i} has vertex index {bad} out of range for {n_vertices} vertices")
+        out.append(array.astype(np.int64))
+    vertex_indices("faces", np.concatenate(out), n_vertices, sizes=[len(f) for f in out])
+    for i, array in enumerate(out):
         if len(np.unique(array)) != len(array):
             raise ValueError(f"faces: face {i} repeats a vertex ({array.tolist()})")
-        out.append(array.astype(np.int64))
     return out
 
 
@@ -101,8 +87,7 @@ class SubdivisionSurface:
         for f in self.faces:
             f.flags.writeable = False
         self._units = _ptex_sizes(np.array([len(f) for f in self.faces]))  # u range of each face
-        self._patches = _build_patches(self.vertices, self.faces)
-        self._tables: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()  # Device -> PatchTable
+        self._table, self._lookup = _build_patches(self.vertices, self.faces)
 
     @classmethod
     def load(cls, path) -> "SubdivisionSurface":
@@ -115,7 +100,7 @@ class SubdivisionSurface:
 
     def __repr__(self) -> str:
         return (f"SubdivisionSurface({len(self.vertices)} vertices, {len(self.faces)} faces, "
-                f"{len(self._patches.first)} patches)")
+                f"{len(self._table)} patches)")
 
     def transformed(self, matrix) -> "SubdivisionSurface":
         """This surface under a 4x4 affine ``matrix`` (limit surfaces are affine invariant)."""
@@ -135,7 +120,7 @@ class SubdivisionSurface:
     @property
     def patch_count(self) -> int:
         """Number of patches in the patch table."""
-        return len(self._patches.first)
+        return len(self._table)
 
     def voxelize(self, resolution: int, connectivity: int = 26, device=None):
         """This surface voxelized into a ``resolution``^3 cubic frame buffer with N-adjacency ``connectivity``
@@ -145,24 +130,9 @@ class SubdivisionSurface:
         return voxelize.voxelize(get_device(device), self, resolution, connectivity)
 
     def patch_table(self, device=None) -> PatchTable:
-        """The :class:`PatchTable` (world coordinates) with device buffers on ``device``; cached per device."""
-        device = get_device(device)
-        table = self._tables.get(device)
-        if table is None:
-            p = self._patches
-            points = np.ascontiguousarray(p.points, dtype=np.float32)
-            first = np.ascontiguousarray(p.first, dtype=np.uint32)
-            levels = np.ascontiguousarray(p.levels, dtype=np.uint32)
-            for array in (points, first, levels):
-                array.flags.writeable = False
-            table = PatchTable(
-                points=points, first=first, levels=levels, face=p.face.copy(), domain=p.domain.copy(),
-                rotation=p.rotation.copy(), neighbors=p.neighbors.copy(),
-                points_dev=device.to_device(points), first_dev=device.to_device(first),
-                levels_dev=device.to_device(levels),
-            )
-            self._tables[device] = table
-        return table
+        """The :class:`PatchTable` (world coordinates), its buffers uploaded to ``device``."""
+        self._table.buffers(get_device(device))
+        return self._table
 
     # Evaluation ------------------------------------------------------------------------------------
     def _parameters(self, face, u, v) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -179,16 +149,16 @@ class SubdivisionSurface:
         return self._locate(face, u, v)[:3]
 
     def _locate(self, face, u, v):
-        p = self._patches
+        p, table = self._lookup, self._table
         res = p.cell_res[face]
         width = self._units[face] * res
         i = np.clip(np.floor(u * res).astype(np.int64), 0, width - 1)
         j = np.clip(np.floor(v * res).astype(np.int64), 0, res - 1)
         patch = p.cells[p.cell_start[face] + j * width + i]
-        u0, v0, du, dv = p.domain[patch].T
+        u0, v0, du, dv = table.domain[patch].T
         s = np.clip((u - u0) / du, 0.0, 1.0)
         t = np.clip((v - v0) / dv, 0.0, 1.0)
-        rot = p.rotation[patch]
+        rot = table.rotation[patch]
         pu = np.choose(rot, [s, t, 1.0 - s, 1.0 - t])
         pv = np.choose(rot, [t, 1.0 - s, 1.0 - t, s])
         return patch, pu, pv, rot, du, dv
@@ -208,7 +178,7 @@ class SubdivisionSurface:
         if n:
             options = ("-DDERIVATIVES",) if derivatives else ()
             dev.kernel("subdivision.cl", "evaluate", options)(
-                dev.queue, (n,), None, table.points_dev, table.first_dev, table.levels_dev,
+                dev.queue, (n,), None, *table.buffers(dev),
                 dev.to_device(patch), dev.to_device(u), dev.to_device(v), np.int32(n), *outs)
         position = dev.from_device(outs[0], (n, 3), np.float32)
         if not derivatives:
@@ -244,22 +214,22 @@ class SubdivisionSurface:
         patch, pu, pv, rot, du, dv = self._locate(face, u, v)
         _, d_u, d_v = self.evaluate_patches(patch, pu, pv, device)
         d_u, d_v = d_u.astype(np.float64), d_v.astype(np.float64)
-        levels = self._patches.levels[patch]
+        levels = self._table.levels[patch]
         near = (levels > 0) & (np.maximum(pu, pv) < NEAR_EV)
         if near.any():
             d_u[near], d_v[near] = self._stam_derivatives(patch[near], pu[near], pv[near])
         normal = np.cross(d_u, d_v)
         normal /= np.linalg.norm(normal, axis=1, keepdims=True)
         # At the EV itself (where patch_eval returns its limit position): the closed-form limit normal.
-        ev_normal = self._patches.ev_normals[patch]
+        ev_normal = self._lookup.ev_normals[patch]
         at_ev = (levels > 0) & (np.maximum(pu, pv) < 2.0 ** -levels.astype(np.float64)) & np.isfinite(ev_normal[:, 0])
         normal[at_ev] = ev_normal[at_ev]
         return normal.astype(np.float32)
 
     def _stam_derivatives(self, patch, u, v) -> tuple[np.ndarray, np.ndarray]:
         """float64 (dP/du, dP/dv) on Stam patches (host version of patch_eval's sub-domain choice)."""
-        p = self._patches
-        levels = p.levels[patch].astype(np.int64)
+        table, p = self._table, self._lookup
+        levels = table.levels[patch].astype(np.int64)
         floor = 2.0 ** -levels
         inside = np.maximum(u, v) < floor
         u, v = np.where(inside, floor, u), np.where(inside, floor, v)
@@ -270,7 +240,7 @@ class SubdivisionSurface:
         k = np.where(vv < 1.0, 0, np.where(uu >= 1.0, 1, 2))
         uu = np.where(k < 2, uu - 1.0, uu)
         vv = np.where(k > 0, vv - 1.0, vv)
-        first = p.first[patch].astype(np.int64) + ((n - 1) * 3 + k) * 16
+        first = table.first[patch].astype(np.int64) + ((n - 1) * 3 + k) * 16
         net = p.points[first[:, None] + np.arange(16)].reshape(-1, 4, 4, 3)  # [point, j, i, xyz]
         bu, bu_d = _bspline_basis(uu)
         bv, bv_d = _bspline_basis(vv)
