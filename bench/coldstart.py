@@ -11,7 +11,9 @@ the wall time, while on a quiet machine wall is about CPU (the work is serial co
 ``--source DIR`` (repeatable) runs the shadowcl of another checkout (``DIR/host`` and ``DIR/kernels``,
 e.g. one extracted with ``git archive``), so that old and new are timed alternately in one run:
 A, B, A, B ... and compared by medians. ``--trace`` adds, per run, every program build and every
-kernel's first launch (per local size) with its CPU time: which compiles a render pays for.
+kernel's first launch (per local size) with its CPU time: which compiles a render pays for. Every run
+also counts what PoCL compiled, from its cache folder: one ``program.bc`` per program build and one
+``.so`` per kernel work-group function (a kernel launched with several local sizes compiles once each).
 
 Writes OUT/coldstart.{json,md}.
 """
@@ -76,6 +78,11 @@ from shadowcl.cli import main
 sys.argv = ["shadowcl"] + args
 code = main()
 print("COLDSTART-EVENTS " + json.dumps(events))
+# What PoCL compiled, from its cache: a program.bc per program build, a .so per work-group function
+import os
+names = [name for _, _, files in os.walk(os.environ["POCL_CACHE_DIR"]) for name in files]
+print("COLDSTART-COMPILED " + json.dumps({"programs": names.count("program.bc"),
+                                          "kernels": sum(name.endswith(".so") for name in names)}))
 sys.exit(code or 0)
 """
 
@@ -94,12 +101,14 @@ def cold_run(python: str, source: Path, render_args: list[str], trace: bool) -> 
         # communicate() has reaped the child; its rusage (with its own children) is in RUSAGE_CHILDREN
         if process.returncode:
             raise RuntimeError(f"render failed ({process.returncode}) with {source}:\n{stderr}")
-    events = []
+    events, compiled = [], {}
     for line in stdout.splitlines():
         if line.startswith("COLDSTART-EVENTS "):
             events = json.loads(line.split(" ", 1)[1])
+        elif line.startswith("COLDSTART-COMPILED "):
+            compiled = json.loads(line.split(" ", 1)[1])
     stages = next((line for line in stdout.splitlines() if line.startswith("times:")), "")
-    return {"wall": wall, "events": events, "stages": stages}
+    return {"wall": wall, "events": events, "compiled": compiled, "stages": stages}
 
 
 def children_cpu() -> float:
@@ -129,14 +138,16 @@ def main(argv=None) -> int:
             run = cold_run(sys.executable, source, args.args, args.trace)
             run["cpu"] = children_cpu() - before
             runs[label].append(run)
-            print(f"{label} run {repeat + 1}: cpu {run['cpu']:.2f} s, wall {run['wall']:.2f} s; {run['stages']}")
+            print(f"{label} run {repeat + 1}: cpu {run['cpu']:.2f} s, wall {run['wall']:.2f} s, compiled "
+                  f"{run['compiled'].get('programs')} programs, {run['compiled'].get('kernels')} kernels; {run['stages']}")
             for what, seconds in run["events"]:
                 print(f"    {what:56s} cpu {seconds:.3f} s")
 
     summary = {label: {"cpu_median": statistics.median(r["cpu"] for r in rs),
                        "cpu_min": min(r["cpu"] for r in rs),
                        "wall_median": statistics.median(r["wall"] for r in rs),
-                       "wall_min": min(r["wall"] for r in rs)} for label, rs in runs.items()}
+                       "wall_min": min(r["wall"] for r in rs),
+                       "compiled": rs[0]["compiled"]} for label, rs in runs.items()}
     load = os.getloadavg()
     result = {"python": sys.version.split()[0], "machine": platform.machine(), "cpus": os.cpu_count(),
               "load_average_after": load, "repeats": args.repeats, "render_args": args.args,
@@ -147,10 +158,23 @@ def main(argv=None) -> int:
              "", f"{args.repeats} runs per source, alternating; load average after the run "
              f"{load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} on {os.cpu_count()} CPUs (wall is stretched by it, "
              "CPU time much less).", "",
-             "| source | CPU median (s) | CPU min (s) | wall median (s) | wall min (s) |", "|---|---|---|---|---|"]
+             "| source | CPU median (s) | CPU min (s) | wall median (s) | wall min (s) | programs, kernels compiled |",
+             "|---|---|---|---|---|---|"]
     for label, row in summary.items():
         lines.append(f"| {label} | {row['cpu_median']:.2f} | {row['cpu_min']:.2f} | {row['wall_median']:.2f} | "
-                     f"{row['wall_min']:.2f} |")
+                     f"{row['wall_min']:.2f} | {row['compiled'].get('programs')}, {row['compiled'].get('kernels')} |")
+    if args.trace:
+        lines += ["", "Traced builds and first launches (median CPU seconds over the runs; - : not in that source):", "",
+                  "| event | " + " | ".join(labels) + " |", "|---|" + "---|" * len(labels)]
+        for what in dict.fromkeys(what for rs in runs.values() for r in rs for what, _ in r["events"]):
+            cells = []
+            for rs in runs.values():
+                seconds = [dict(r["events"]).get(what) for r in rs]
+                seconds = [x for x in seconds if x is not None]
+                cells.append(f"{statistics.median(seconds):.3f}" if seconds else "-")
+            lines.append(f"| {what} | " + " | ".join(cells) + " |")
+        totals = [statistics.median(sum(seconds for _, seconds in r["events"]) for r in rs) for rs in runs.values()]
+        lines.append("| all of them (median of the runs' sums) | " + " | ".join(f"{t:.2f}" for t in totals) + " |")
     (args.out / "coldstart.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
     return 0

@@ -281,15 +281,11 @@ INLINE lint walk_cells(const int *cell, lint valid, lint hit, const Packet *p, _
  * records (see TEST_DOT5); lists_a, lists_b: (offsets, items) or (heads, nodes) over the grid's cells;
  * (lx, ly, lz): light position (relative) or direction; walk_coarse: 0 when no primitive is coarse
  * (the coarse lists are empty). Writes out[index] for every binned receiver (of n). */
-__kernel void exact_classify(__global const float4 *binned, __global const int *binned_index, int nbinned,
-                             __constant const float *views,
-                             __global const float *tris, int ntris,
-                             int brute_cell, __global const int *lists_a, __global const int *lists_b,
-                             float lx, float ly, float lz, int walk_coarse, int n, __global uchar *out)
+NOINLINE void exact_classify_item(int base, __global const float4 *binned, __global const int *binned_index,
+                                  int nbinned, __constant const float *views, __global const float *tris, int ntris,
+                                  int brute_cell, __global const int *lists_a, __global const int *lists_b,
+                                  float lx, float ly, float lz, int walk_coarse, int n, __global uchar *out)
 {
-    const int base = LANES * get_global_id(0);
-    if (base >= nbinned)
-        return;
     /* The lanes' receivers; lanes past the end repeat the last one and are not valid */
     float sx[LANES], sy[LANES], sz[LANES], tmin[LANES];
     int fine[LANES], coarse[LANES], index[LANES], lane[LANES];
@@ -312,6 +308,20 @@ __kernel void exact_classify(__global const float4 *binned, __global const int *
     for (int j = 0; j < LANES && base + j < nbinned; ++j)
         if ((uint)index[j] < (uint)n)        /* pass 2 filled every slot: the host checked its count */
             out[index[j]] = (uchar)(hit_lane[j] != 0);
+}
+
+/* Pass 3's kernel: work-item g classifies the packet from binned receiver LANES g (its body is a NOINLINE
+ * function: vecmath.h says why) */
+__kernel void exact_classify(__global const float4 *binned, __global const int *binned_index, int nbinned,
+                             __constant const float *views,
+                             __global const float *tris, int ntris,
+                             int brute_cell, __global const int *lists_a, __global const int *lists_b,
+                             float lx, float ly, float lz, int walk_coarse, int n, __global uchar *out)
+{
+    const int base = LANES * get_global_id(0);
+    if (base < nbinned)
+        exact_classify_item(base, binned, binned_index, nbinned, views, tris, ntris, brute_cell, lists_a, lists_b,
+                            lx, ly, lz, walk_coarse, n, out);
 }
 
 #if LANES == 1
@@ -344,31 +354,10 @@ __kernel void exact_classify_points(BIN_ARGS, __global const float *tris, int nt
 }
 #endif
 
-/* Triangles as 9 floats each from relative float32 vertices and int faces (the corners are copied bit
- * for bit, so triangles sharing a vertex share its floats: what watertightness needs). */
-__kernel void gather_triangles(__global const float *vertices, __global const int *faces, int ntris,
-                               __global float *tris)
-{
-    const int t = get_global_id(0);
-    if (t >= ntris)
-        return;
-    for (int k = 0; k < 3; ++k) {
-        const int v = faces[3 * t + k];
-        tris[9 * t + 3 * k] = vertices[3 * v];
-        tris[9 * t + 3 * k + 1] = vertices[3 * v + 1];
-        tris[9 * t + 3 * k + 2] = vertices[3 * v + 2];
-    }
-}
-
-/* Watertight records from 9-float triangles and the light (point: its relative position; directional:
+/* Watertight record of triangle v (9 floats) and the light (point: its relative position; directional:
  * the direction its light travels): see WT_FLOATS in ray_triangle.h. */
-__kernel void wt_records(__global const float *tris, int ntris, float lx, float ly, float lz, __global float *rec)
+INLINE void wt_record(const float *v, float lx, float ly, float lz, __global float *r)
 {
-    const int t = get_global_id(0);
-    if (t >= ntris)
-        return;
-    __global const float *v = tris + 9 * t;
-    __global float *r = rec + WT_FLOATS * t;
     for (int k = 0; k < 9; ++k)
         r[k] = v[k];
     const float ux = v[3] - v[0], uy = v[4] - v[1], uz = v[5] - v[2];
@@ -395,15 +384,12 @@ __kernel void wt_records(__global const float *tris, int ntris, float lx, float 
     r[14] = rel; r[15] = 0.0f;
 }
 
-/* Dot5 records from 9-float triangles: see DOT5_FLOATS in ray_triangle.h. */
-__kernel void dot5_records(__global const float *tris, int ntris, __global float *rec)
+/* Dot5 record of triangle v (9 floats): see DOT5_FLOATS in ray_triangle.h. */
+INLINE void dot5_record(const float *v, __global float *r)
 {
-    const int t = get_global_id(0);
-    if (t >= ntris)
-        return;
-    const float p0x = tris[9 * t], p0y = tris[9 * t + 1], p0z = tris[9 * t + 2];
-    const float ux = tris[9 * t + 3] - p0x, uy = tris[9 * t + 4] - p0y, uz = tris[9 * t + 5] - p0z;
-    const float vx = tris[9 * t + 6] - p0x, vy = tris[9 * t + 7] - p0y, vz = tris[9 * t + 8] - p0z;
+    const float p0x = v[0], p0y = v[1], p0z = v[2];
+    const float ux = v[3] - p0x, uy = v[4] - p0y, uz = v[5] - p0z;
+    const float vx = v[6] - p0x, vy = v[7] - p0y, vz = v[8] - p0z;
     float nx = uy * vz - uz * vy, ny = uz * vx - ux * vz, nz = ux * vy - uy * vx;
     const float uu = dot3(ux, uy, uz, ux, uy, uz), uv = dot3(ux, uy, uz, vx, vy, vz), vv = dot3(vx, vy, vz, vx, vy, vz);
     const float den = uv * uv - uu * vv;
@@ -411,10 +397,45 @@ __kernel void dot5_records(__global const float *tris, int ntris, __global float
     if (!(den != 0.0f) || !(nx != 0.0f || ny != 0.0f || nz != 0.0f)) {
         nx = 0.0f; ny = 0.0f; nz = 0.0f; inv = 0.0f;
     }
-    __global float *r = rec + DOT5_FLOATS * t;
     r[0] = p0x; r[1] = p0y; r[2] = p0z;
     r[3] = nx; r[4] = ny; r[5] = nz;
     r[6] = ux; r[7] = uy; r[8] = uz;
     r[9] = vx; r[10] = vy; r[11] = vz;
     r[12] = uu * inv; r[13] = uv * inv; r[14] = vv * inv; r[15] = 0.0f;
+}
+
+/* Per triangle t: its corners gathered from relative float32 vertices and int faces into tris (9 floats;
+ * copied bit for bit, so triangles sharing a vertex share its floats: what watertightness needs) and its
+ * test's record into rec (TEST_DOT5's kind; the light as in wt_record). One kernel for both: on PoCL each
+ * kernel's first launch costs a compile. */
+__kernel void triangle_records(__global const float *vertices, __global const int *faces, int ntris, float lx,
+                               float ly, float lz, __global float *tris, __global float *rec)
+{
+    const int t = get_global_id(0);
+    if (t >= ntris)
+        return;
+    float v[9];
+    for (int k = 0; k < 3; ++k) {
+        LOAD3(vertices, faces[3 * t + k], v[3 * k], v[3 * k + 1], v[3 * k + 2]);
+        tris[9 * t + 3 * k] = v[3 * k];
+        tris[9 * t + 3 * k + 1] = v[3 * k + 1];
+        tris[9 * t + 3 * k + 2] = v[3 * k + 2];
+    }
+#if TEST_DOT5
+    dot5_record(v, rec + DOT5_FLOATS * t);
+#else
+    wt_record(v, lx, ly, lz, rec + WT_FLOATS * t);
+#endif
+}
+
+/* Dot5 records from 9-float triangles (the voxel method's). */
+__kernel void dot5_records(__global const float *tris, int ntris, __global float *rec)
+{
+    const int t = get_global_id(0);
+    if (t >= ntris)
+        return;
+    float v[9];
+    for (int k = 0; k < 9; ++k)
+        v[k] = tris[9 * t + k];
+    dot5_record(v, rec + DOT5_FLOATS * t);
 }

@@ -19,36 +19,31 @@
 
 #include "vecmath.h"
 
-/* Exclusive prefix sum in two launches, each work-item scanning a block serially (no local memory,
- * no barriers: DESIGN.md item 13). sums gets one long per block, then the total. */
-__kernel void scan_block_sums(__global const int *counts, int n, int block, __global long *sums)
+/* Exclusive prefix sum in two launches of one kernel (one compile on PoCL, where a kernel's first launch
+ * compiles it), each work-item g scanning block g of counts serially (no local memory, no barriers:
+ * DESIGN.md item 13).
+ *   phase 0: sums[g] = the block's total (long).
+ *   phase 1: offsets[i] = sum of counts[0..i); offsets[n] = total, and sums[nblocks] = total (long).
+ *            Work-item g adds up the block sums before its block itself (at most SCAN_BLOCKS of them:
+ *            cheaper than a third launch). Valid when the total fits an int (host checks). */
+__kernel void scan_blocks(__global const int *counts, int n, int block, __global long *sums,
+                          __global int *offsets, int nblocks, int phase)
 {
     const int g = get_global_id(0);
     const int start = g * block;
     if (start >= n)
         return;
     const int end = min(n, start + block);
-    long s = 0;
-    for (int i = start; i < end; ++i)
-        s += counts[i];
-    sums[g] = s;
-}
-
-/* offsets[i] = sum of counts[0..i); offsets[n] = total, and sums[nblocks] = total (long). Work-item g
- * adds up the block sums before its block itself (at most SCAN_BLOCKS of them: cheaper than a third
- * kernel, whose first launch alone costs a compile on PoCL). Valid when the total fits an int (host
- * checks). */
-__kernel void scan_blocks(__global const int *counts, int n, int block, __global long *sums,
-                          __global int *offsets, int nblocks)
-{
-    const int g = get_global_id(0);
-    const int start = g * block;
-    if (start >= n)
+    if (phase == 0) {
+        long s = 0;
+        for (int i = start; i < end; ++i)
+            s += counts[i];
+        sums[g] = s;
         return;
+    }
     long before = 0;
     for (int k = 0; k < g; ++k)
         before += sums[k];
-    const int end = min(n, start + block);
     int run = (int)before;
     for (int i = start; i < end; ++i) {
         offsets[i] = run;

@@ -138,15 +138,12 @@ INLINE float4 transform(constant float *m, const float x, const float y, const f
  *      (zero before) counts, at most n: the raster passes share them among several work-items.
  * Clip-space corners that are not finite, or with w <= 0 after clipping (a matrix whose clip volume
  * reaches w = 0), drop the triangle. */
-kernel void raster_setup(global const float *vertices, global const int *faces, constant float *matrix,
-                         const int width, const int height, const int n, global int *corner_count,
-                         global int2 *corner_xy, global float *corner_depth, global int *big,
-                         volatile global int *big_count)
+/* raster_setup's work-item gid (NOINLINE: a kernel's body, vecmath.h) */
+NOINLINE void setup_triangle(const int gid, global const float *vertices, global const int *faces,
+                             constant float *matrix, const int width, const int height, global int *corner_count,
+                             global int2 *corner_xy, global float *corner_depth, global int *big,
+                             volatile global int *big_count)
 {
-    const int gid = get_global_id(0);
-    if (gid >= n)
-        return;
-
     /* Transform the corners to clip space */
     float4 clipped[MAX_CORNERS], scratch[MAX_CORNERS];
     for (int k = 0; k < 3; ++k) {
@@ -191,6 +188,17 @@ kernel void raster_setup(global const float *vertices, global const int *faces, 
         if (!is_empty(box) && is_big(box))
             big[atomic_inc(big_count)] = gid;
     }
+}
+
+kernel void raster_setup(global const float *vertices, global const int *faces, constant float *matrix,
+                         const int width, const int height, const int n, global int *corner_count,
+                         global int2 *corner_xy, global float *corner_depth, global int *big,
+                         volatile global int *big_count)
+{
+    const int gid = get_global_id(0);
+    if (gid < n)
+        setup_triangle(gid, vertices, faces, matrix, width, height, corner_count, corner_xy, corner_depth, big,
+                       big_count);
 }
 
 /* ---------------------------------------------------------------------------------------------- */
@@ -327,15 +335,13 @@ INLINE void draw_triangle(const enum pass pass, int2 a, int2 b, int2 c, float za
  * work-items (a 1D range, so that every launch has one local size and PoCL compiles the kernel once):
  * work-item k < n draws triangle k whole, unless its box is empty or big; the rest draw rows band,
  * band + bands, ... of big triangle big[j], (j, band) numbered band-major from n on, so that a
- * work-group holds bands of many big triangles and each big triangle spreads over work-groups. */
-INLINE void draw_polygon(const enum pass pass, global const int *big, const int n, const int big_count,
-                         const int bands, global const int *corner_count, global const int2 *corner_xy,
-                         global const float *corner_depth, const int width, const int height,
-                         global uint *target, global const uint *depth_bits)
+ * work-group holds bands of many big triangles and each big triangle spreads over work-groups. This is
+ * work-item k of raster_pass (NOINLINE: a kernel's body, vecmath.h). */
+NOINLINE void draw_polygon(const long k, const enum pass pass, global const int *big, const int n,
+                           const int big_count, const int bands, global const int *corner_count,
+                           global const int2 *corner_xy, global const float *corner_depth, const int width,
+                           const int height, global uint *target, global const uint *depth_bits)
 {
-    const long k = get_global_id(0);
-    if (k >= n + (long)big_count * bands)
-        return;
     const bool whole = k < n;
     const int i = whole ? (int)k : big[(k - n) % max(big_count, 1)], band = whole ? 0 : (int)((k - n) / big_count);
     const int count = corner_count[i];
@@ -375,8 +381,10 @@ kernel void raster_pass(global const int *big, const int n, const int big_count,
                         global const float *corner_depth, const int width, const int height, const int pass,
                         global uint *target, global const uint *depth_bits)
 {
-    draw_polygon((enum pass)pass, big, n, big_count, bands, corner_count, corner_xy, corner_depth, width, height,
-                 target, depth_bits);
+    const long k = get_global_id(0);
+    if (k < n + (long)big_count * bands)
+        draw_polygon(k, (enum pass)pass, big, n, big_count, bands, corner_count, corner_xy, corner_depth, width,
+                     height, target, depth_bits);
 }
 
 /* ---------------------------------------------------------------------------------------------- */
@@ -427,15 +435,12 @@ INLINE float3 unproject(constant float *inverse, const float x, const float y, c
  * The ray starts at the pixel centre unprojected at depth 1 and points towards depth 0.5 (as
  * View.pixel_rays). If the plane is parallel to the ray in float32, the point is the pixel centre
  * unprojected at its stored depth instead. */
-kernel void raster_receivers(global const int *pixel, global const uint *triangle,
-                             global const uint *depth_bits, global const float *vertices, global const int *faces,
-                             constant float *inverse, const int width, const int height, const int m,
-                             global float *points, global float *normals)
+/* raster_receivers' work-item gid (NOINLINE: a kernel's body, vecmath.h) */
+NOINLINE void receiver(const int gid, global const int *pixel, global const uint *triangle,
+                       global const uint *depth_bits, global const float *vertices, global const int *faces,
+                       constant float *inverse, const int width, const int height, global float *points,
+                       global float *normals)
 {
-    const int gid = get_global_id(0);
-    if (gid >= m)
-        return;
-
     /* The pixel centre's ray */
     const int p = pixel[gid], row = p / width, col = p - row * width;
     const float x = (2.0f * col + 1.0f) / width - 1.0f, y = 1.0f - (2.0f * row + 1.0f) / height;
@@ -458,4 +463,14 @@ kernel void raster_receivers(global const int *pixel, global const uint *triangl
     const bool finite = has_plane && SC_ABS(t) <= FLT_MAX; /* false for inf and NaN */
     store3(finite ? start + t * direction : unproject(inverse, x, y, as_float(depth_bits[p])), points + 3 * gid);
     store3(facing > 0.0f ? -normal : normal, normals + 3 * gid);
+}
+
+kernel void raster_receivers(global const int *pixel, global const uint *triangle,
+                             global const uint *depth_bits, global const float *vertices, global const int *faces,
+                             constant float *inverse, const int width, const int height, const int m,
+                             global float *points, global float *normals)
+{
+    const int gid = get_global_id(0);
+    if (gid < m)
+        receiver(gid, pixel, triangle, depth_bits, vertices, faces, inverse, width, height, points, normals);
 }

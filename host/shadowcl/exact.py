@@ -217,13 +217,17 @@ class ExactMethod(Method):
             f"-DWT_REFINE_F64={int(self._fp64)}",
             f"-DLANES={BIN_LANES if self.order == 'cells' else 1}",
         )
-        tris_dev = dev.empty(36 * ntris, "triangles")                # (F, 3, 3) float32, gathered on the device
-        dev.kernel("exact.cl", "gather_triangles", options)(dev.queue, (ntris,), None, dev.to_device(vertices),
-                                                            dev.to_device(mesh.faces), np.int32(ntris), tris_dev)
         if isinstance(light, PointLight):
             light_vec = (light.position - origin).astype(np.float32)
         else:
             light_vec = np.asarray(light.direction, dtype=np.float32)
+        # (F, 3, 3) float32 triangles gathered on the device, and in the same launch the test's records
+        tris_dev = dev.empty(36 * ntris, "triangles")
+        floats, kind = (DOT5_FLOATS, "dot5") if self.test == "dot5" else (WT_FLOATS, "watertight")
+        records = dev.empty(4 * floats * ntris, f"{kind} triangle records")
+        dev.kernel("exact.cl", "triangle_records", options)(
+            dev.queue, (ntris,), None, dev.to_device(vertices), dev.to_device(mesh.faces), np.int32(ntris),
+            *(np.float32(c) for c in light_vec), tris_dev, records)
         t1 = time.perf_counter()
         # Views and grid
         views = lightspace.fit_to_footprint(dev, views, tris_dev, ntris)
@@ -235,17 +239,8 @@ class ExactMethod(Method):
         if self.split and self.lists_kind == "csr" and \
                 lists.coarse_entries > SPLIT_PER_COARSE_CELL * (grid.cells - grid.fine_cells):
             lists, split = self._split_lists(grid, lists, vertices, mesh.faces)
-        t3 = time.perf_counter()
-        if self.test == "dot5":
-            records = dev.empty(4 * DOT5_FLOATS * ntris, "dot5 triangle records")
-            dev.kernel("exact.cl", "dot5_records", options)(dev.queue, (ntris,), None, tris_dev, np.int32(ntris),
-                                                            records)
-        else:
-            records = dev.empty(4 * WT_FLOATS * ntris, "watertight triangle records")
-            dev.kernel("exact.cl", "wt_records", options)(dev.queue, (ntris,), None, tris_dev, np.int32(ntris),
-                                                          *(np.float32(c) for c in light_vec), records)
         dev.queue.finish()
-        t4 = time.perf_counter()
+        t3 = time.perf_counter()
 
         self.mesh, self.light, self.eps, self.origin = mesh, light, float(eps), origin
         self.grid, self.lists, self._tris_dev, self._records = grid, lists, tris_dev, records
@@ -259,7 +254,7 @@ class ExactMethod(Method):
             triangles=ntris, lists=self.lists_kind, test=self.test, device_bytes=int(device_bytes), **split,
             # entries per fine cell; linked lists do not know their coarse share, so it is counted in there
             mean_list=(lists.entries - max(lists.coarse_entries, 0)) / grid.fine_cells,
-            upload_s=t1 - t0, views_s=t2 - t1, lists_s=t3 - t2, records_s=t4 - t3, prepare_s=t4 - t0,
+            upload_s=t1 - t0, views_s=t2 - t1, lists_s=t3 - t2, prepare_s=t3 - t0,
         )
 
     def resolved_params(self) -> dict:
@@ -296,7 +291,7 @@ class ExactMethod(Method):
         """
         dev = self.device
         large = _sorted_unique(self._coarse_items(lists))
-        triangles = vertices[faces]                                   # (F, 3, 3) float32, as gather_triangles
+        triangles = vertices[faces]                                   # (F, 3, 3) float32, as triangle_records
         pieces, owner = triangles[large], large.astype(np.int32)
         done_pieces, done_owner, rounds = [], [], 0
         while len(pieces) and rounds < SPLIT_ROUNDS:

@@ -1,7 +1,7 @@
 """Device lists' shared host mechanisms (kernels/lists.h has the device side).
 
 :func:`prefix_sum` turns per-segment counts into CSR offsets on the device; any program that includes
-``lists.h`` carries its two kernels, so the caller passes its own kernel lookup (no extra program build).
+``lists.h`` carries its kernel, so the caller passes its own kernel lookup (no extra program build).
 The segmented sort is ``lists.h``'s ``SC_DEFINE_SEGMENT_SORT``, called from the owning kernels.
 :func:`check_filled` is the host's side of DESIGN.md's capacity rule for fills that write into slots a
 count pass made: one check, one message, for every such fill.
@@ -21,9 +21,10 @@ def prefix_sum(device, kernel: Callable[[str], cl.Kernel], counts: cl.Buffer, n:
     """offsets = exclusive prefix sum of the ``n`` int ``counts`` (n + 1 entries); returns the total.
 
     ``kernel(name)`` gives the kernel ``name`` of a program that includes ``lists.h``. Two launches of
-    SCAN_BLOCKS work-items, each scanning a block serially (no local memory or barriers: DESIGN.md
-    item 13; a work-group scan in local memory was measured 1.1-9x slower on PoCL, bench/lists.py); the
-    total is summed in 64 bits, the offsets are valid when it fits an int (the caller checks).
+    one kernel (one compile) on SCAN_BLOCKS work-items, each scanning a block serially (no local memory
+    or barriers: DESIGN.md item 13; a work-group scan in local memory was measured 1.1-9x slower on PoCL,
+    bench/lists.py); the total is summed in 64 bits, the offsets are valid when it fits an int (the
+    caller checks).
     """
     queue = device.queue
     if n == 0:                          # no block to scan
@@ -32,9 +33,10 @@ def prefix_sum(device, kernel: Callable[[str], cl.Kernel], counts: cl.Buffer, n:
     block = max(1024, -(-n // SCAN_BLOCKS))
     nblocks = -(-n // block)
     sums = device.scratch("lists: scan block sums", 8 * (nblocks + 1))
-    args = (counts, np.int32(n), np.int32(block))
-    kernel("scan_block_sums")(queue, (nblocks,), None, *args, sums)
-    kernel("scan_blocks")(queue, (nblocks,), None, *args, sums, offsets, np.int32(nblocks))
+    scan = kernel("scan_blocks")
+    for phase in (0, 1):          # the blocks' sums, then the offsets
+        scan(queue, (nblocks,), None, counts, np.int32(n), np.int32(block), sums, offsets, np.int32(nblocks),
+             np.int32(phase))
     total = np.empty(1, np.int64)
     cl.enqueue_copy(queue, total, sums, src_offset=8 * nblocks)
     return int(total[0])
