@@ -3,7 +3,8 @@
 Each example either loads a correct mesh or raises ValueError/TypeError (FileNotFoundError for a scene's
 missing mesh) whose message names the file; nothing else may escape. Unmutated files must load the
 mesh they were written from, and a mutation whose effect is known (a bad number, a bad index) must be
-refused at its line. Examples are derandomized and counted, so the run is bounded (9 s here at load 10).
+refused at its line. Examples are drawn from a fixed seed and counted (conftest.fuzz), so the run is bounded
+(9 s here at load 10).
 """
 
 import copy
@@ -13,13 +14,13 @@ import struct
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given
 from hypothesis import strategies as st
 
 import shadowcl as sc
+from conftest import fuzz
 
-FUZZ = settings(max_examples=80, deadline=5000, derandomize=True, database=None,
-                suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+FUZZ = fuzz(100, deadline=5000)
 FORMATS = ["obj", "off", "ply_ascii", "ply_le", "ply_be", "stl_ascii", "stl_binary"]
 SUFFIX = {"obj": ".obj", "off": ".off", "stl_ascii": ".stl", "stl_binary": ".stl"}
 BAD_NUMBERS = ["nan", "inf", "-inf", "1e39", "a", "1,5", "0x10", "--1", "\xff", "1e400"]
@@ -370,7 +371,7 @@ def obj_records(hostile: bool):
                               records(others, ["1", "a"])), max_size=12)
 
 
-@settings(max_examples=300, deadline=5000, derandomize=True, database=None)
+@fuzz(300, deadline=5000)
 @given(records=st.one_of(obj_records(False), obj_records(True)), newline=st.sampled_from(["\n", "\r\n"]))
 def test_bulk_obj_agrees_with_the_line_parser(records, newline):
     """Files of valid and hostile OBJ records: the bulk reader (which hands what it declines to the line
@@ -406,7 +407,7 @@ def test_bulk_obj_reads_the_common_forms():
 OFF_GOOD_VERTEX = ["0", "1", "-1.5", "2e-1", "+3"]
 
 
-@settings(max_examples=300, deadline=5000, derandomize=True, database=None)
+@fuzz(300, deadline=5000)
 @given(counts=st.tuples(st.integers(0, 4), st.integers(0, 4)), data=st.data(),
        extra=st.sampled_from(["", "0", "x"]), hostile=st.booleans(), newline=st.sampled_from(["\n", "\r\n"]))
 def test_bulk_off_agrees_with_the_line_parser(counts, data, extra, hostile, newline):
@@ -450,7 +451,7 @@ STL_HOSTILE_LINES = ["VERTEX 1 2 3", "vertex 1 2", "vertex 1 2 3 4", "vertex 1 n
                      "endfacet", "bogus", "vertex 1\xa02 3", "vertex 0x1 2 3"]
 
 
-@settings(max_examples=200, deadline=5000, derandomize=True, database=None)
+@fuzz(200, deadline=5000)
 @given(facets=st.lists(st.lists(st.tuples(st.sampled_from(["0", "1", "-2.5", "3e-2", "+4"]), st.sampled_from(["", "  ", "\t"])),
                                 min_size=3, max_size=3), max_size=4),
        hostile=st.lists(st.tuples(st.integers(1, 40), st.sampled_from(STL_HOSTILE_LINES)), max_size=2),
@@ -485,7 +486,7 @@ def test_bulk_ascii_stl_agrees_with_the_line_parser(facets, hostile, newline):
 PLY_HOSTILE = ["1.0", "-1", "1e", "nan", "a", "+2", "99999999999999999999", "\xa0"]
 
 
-@settings(max_examples=200, deadline=5000, derandomize=True, database=None)
+@fuzz(200, deadline=5000)
 @given(nv=st.integers(0, 4), nf=st.integers(0, 3), flag=st.booleans(), hostile=st.booleans(), data=st.data())
 def test_bulk_ascii_ply_agrees_with_the_line_parser(nv, nf, flag, hostile, data):
     """ASCII PLY files (x y z, maybe an int property; faces of a list) of plain and hostile rows (short

@@ -3,7 +3,8 @@
 Every check goes through the public call (``sc.shadow_mask``) on scenes made here (an icosphere over a
 ground quad; a manifold3d box minus a sphere), against the float64 brute force
 (``shadowcl.reference.exact``) on the same float32 vertices. "Right" means: no receiver differs from
-the brute force outside the band where the method may legitimately decide either way:
+the brute force outside the band where the method may legitimately decide either way
+(:func:`shadowcl.testing.wrong_receivers`, shared with bench/redteam.py):
 
 - the float32 band of test_exact.py (segment within FLOAT_BAND of a triangle edge, or its nearest
   hit within FLOAT_BAND of the start or the light): rounding decides there, both answers are right;
@@ -19,23 +20,17 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given
 from hypothesis import strategies as st
 
 import shadowcl as sc
-from shadowcl.frame import MAX_RECEIVER_DISTANCE, is_distant, union
+from conftest import fuzz
+from shadowcl.frame import MAX_RECEIVER_DISTANCE
 from shadowcl.methods import method_class
 from shadowcl.reference import exact as ref
+from shadowcl.testing import wrong_receivers
 
 METHODS = ("exact", "shadow_map", "angular", "shadow_volume")
-FLOAT_BAND = 1e-5   # of the scene's size: float32 rounding, as test_exact.py
-# Of the scene's size, the distance from a shadow edge within which a method's answer is its
-# discretisation's: a 2048-texel map over ~1.5x the scene is ~7e-4 a texel, the band four texels; the
-# angular rows are about one receiver spacing wide (eq. 4), ~0.35 on the 6 x 6 ground with 400
-# receivers, 4 % of the scene's size; the exact and shadow-volume methods have none.
-METHOD_BAND = {"exact": 0.0, "shadow_volume": 0.0, "shadow_map": 3e-3, "angular": 5e-2}
-
-
 def ground_scene(occluder: str = "sphere", half: float = 3.0):
     """An occluder over a 2 half x 2 half ground quad at y = 0 (the quad is an occluder too)."""
     if occluder == "sphere":
@@ -56,32 +51,10 @@ def ground_points(rng, count: int = 400, half: float = 3.0):
     return np.c_[rng.uniform(-half, half, count), np.zeros(count), rng.uniform(-half, half, count)]
 
 
-def free_receivers(method, mesh, light, points, normals, eps):
-    """Receivers where ``method`` may answer either way (module docstring), for a query in the world."""
-    v, f = mesh.vertices, mesh.faces
-    # The method's band is the occluders' (a far receiver must not widen it: that would hide a map
-    # coarsened by it); rounding grows with a receiver's own distance from them.
-    occluders = float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0]))
-    distance = np.linalg.norm(points - 0.5 * (mesh.bounds[0] + mesh.bounds[1]), axis=1)
-    band = np.maximum(FLOAT_BAND * np.maximum(occluders, distance), METHOD_BAND[method] * occluders)
-    free = ref.segment_edge_distance(v, f, light, points, normals, eps) < band
-    free |= ref.shadow_mask(v, f, light, points, normals, eps, margin=FLOAT_BAND * occluders) != \
-        ref.shadow_mask(v, f, light, points, normals, eps, margin=-FLOAT_BAND * occluders)
-    reach = union(mesh.bounds, np.stack([points.min(0), points.max(0)]))
-    if is_distant(light, reach, method_class(method).point_light_reach):
-        parallel = sc.DirectionalLight(0.5 * (reach[0] + reach[1]) - light.position)
-        free |= ref.shadow_mask(v, f, light, points, normals, eps) != ref.shadow_mask(v, f, parallel, points, normals, eps)
-    return free
-
-
 def assert_right(method, mesh, light, points, normals=None, eps=None, what=""):
     """``sc.shadow_mask`` by ``method`` agrees with the brute force outside its free band."""
     mask = sc.shadow_mask(mesh, light, points, normals, method=method, eps=eps)
-    eps_used = eps if eps is not None else 1e-4 * float(np.linalg.norm(mesh.bounds[1] - mesh.bounds[0]))
-    truth = ref.shadow_mask(mesh.vertices, mesh.faces, light, points, normals, eps_used)
-    wrong = np.flatnonzero(mask != truth)
-    if len(wrong):
-        wrong = wrong[~free_receivers(method, mesh, light, points, normals, eps_used)[wrong]]
+    truth, wrong = wrong_receivers(method, mesh, light, points, mask, normals, eps)
     assert len(wrong) == 0, f"{method} {what}: {len(wrong)} of {len(points)} wrong outside the band, e.g. {wrong[:5]}"
     return truth
 
@@ -158,6 +131,27 @@ def test_far_receivers_cost_nobody_accuracy(scene, method):
     assert_right(method, mesh, light, moved, what="far receivers")
     assert_right(method, mesh, light, moved, normals, what="far receivers, normals")
     assert_right(method, mesh, sc.DirectionalLight((-0.3, -1.0, -0.2)), moved, what="far receivers, directional")
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_far_receivers_downstream_of_the_occluders(scene, method):
+    """Receivers straight downstream of the occluders 3 .. 1e4 sizes away (shadowed at any distance)
+    beside the near ones, under a directional and a point light: all right. Before the shadow map cut
+    its windows to the occluders, the second map (fitted to these receivers' 1e4-size box) spread its
+    texels so wide that the sphere fell between them: every one lost its shadow (bench/redteam.py)."""
+    v, f, points, normals = scene
+    mesh = sc.Mesh(v, f)
+    centre = 0.5 * (mesh.bounds[0] + mesh.bounds[1])
+    size = float(np.linalg.norm(np.ptp(mesh.bounds, 0)))
+    for light in (sc.DirectionalLight((-0.3, -1.0, -0.2)), sc.PointLight((0.7, 4.0, 0.4))):
+        towards = light.direction if isinstance(light, sc.DirectionalLight) else centre - light.position
+        towards = towards / np.linalg.norm(towards)
+        moved = points.copy()
+        moved[:6] = centre + towards * size * np.array([3.0, 10.0, 30.0, 100.0, 1e3, 1e4])[:, None]
+        truth = assert_right(method, mesh, light, moved, what=f"downstream receivers, {light}")
+        assert truth[:6].all()
+        assert_right(method, mesh, light, moved, np.tile([0.0, 1.0, 0.0], (len(moved), 1)),
+                     what=f"downstream receivers, {light}, normals")
 
 
 def test_receivers_beyond_the_range_are_refused_by_index(scene):
@@ -258,8 +252,7 @@ def test_huge_eps_is_honoured_by_the_shadow_map_and_refused_by_voxel(scene):
 PLACEMENTS = ("above", "far", "very far", "on a vertex", "near a face", "inside", "directional")
 
 
-@settings(max_examples=24, deadline=None, derandomize=True, database=None,
-          suppress_health_check=[HealthCheck.too_slow])
+@fuzz(96)
 @given(method=st.sampled_from(METHODS), occluder=st.sampled_from(("sphere", "box_minus_sphere")),
        log_scale=st.floats(-12.0, 15.0), offset=st.floats(-1e3, 1e3), placement=st.sampled_from(PLACEMENTS),
        seed=st.integers(0, 2 ** 16), normals=st.booleans(), far_receivers=st.booleans())

@@ -316,7 +316,7 @@ BOX = "[[objects]]\nbox = {}\n"
 OBJECT = LIGHT + "[[objects]]\n"  # an object table follows
 BAD_FILES = [
     (OBJECT + 'mesh = "nothere.obj"\n', FileNotFoundError, r"objects\[0\]\.mesh: no such file .*/nothere\.obj"),
-    (OBJECT + 'mesh = "model.xyz"\n', ValueError, r"objects\[0\]\.mesh: path: unsupported mesh format '.xyz'"),
+    (OBJECT + 'mesh = "model.xyz"\n', ValueError, r"objects\[0\]\.mesh: path: \S*model.xyz: unsupported mesh format '.xyz'"),
     (LIGHT + BOX + "[lamp]\nposition = [0, 1, 0]\n", ValueError,
      r"lamp: unknown key; allowed here: name, render, camera, lights, objects"),
     (OBJECT + "box = {}\ncolour = [1, 0, 0]\n", ValueError,

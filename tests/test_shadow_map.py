@@ -188,12 +188,14 @@ def test_texel_footprint_is_a_texels_widest_extent_across_the_ray(device, rng, l
     relative = points - maps.origin
     perspective = maps.kind != "orthographic"
     checked = 0
+    covered = np.zeros(len(points), dtype=bool)
     for record in maps.views.astype(np.float64):
         m = record[:16].reshape(4, 4)
         clip = relative @ m[:, :3].T + m[:, 3]
         with np.errstate(divide="ignore", invalid="ignore"):   # the points this view's map covers
             seen = (clip[:, 3] > 0) & np.all(np.abs(clip[:, :2] / clip[:, 3:]) <= 1, axis=1)
         p, c = relative[seen], clip[seen]
+        covered |= seen
         half = 0.5 * maps.resolution
         # d(x / w) / dp = (row_x w - x row_w) / w^2; s = (x + 1) R / 2, t = (1 - y) R / 2
         ds = half * (m[0, :3] * c[:, 3:] - c[:, :1] * m[3, :3]) / c[:, 3:] ** 2
@@ -209,7 +211,23 @@ def test_texel_footprint_is_a_texels_widest_extent_across_the_ray(device, rng, l
         # the view record is float32: its size and matrix entries are rounded apart (~6e-8 relative each)
         np.testing.assert_allclose(got, expected, rtol=1e-6)
         checked += len(p)
-    assert checked >= len(points)
+    # A single view's window is cut to the occluders: a point off it is one whose ray misses their box.
+    assert checked >= covered.sum() > 0
+    assert not np.any(segment_meets_box(points[~covered], LIGHTS[light_name], mesh.bounds))
+
+
+def segment_meets_box(points, light, box) -> np.ndarray:
+    """bool (N,): the segment from each point to the point light (the ray against a directional light's
+    travel) meets ``box`` (slab test, float64)."""
+    if isinstance(light, sc.PointLight):
+        direction, end = light.position - points, 1.0
+    else:
+        direction, end = np.broadcast_to(-light.direction, points.shape), np.inf
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t0, t1 = (box[0] - points) / direction, (box[1] - points) / direction
+    enter = np.fmax(np.nanmax(np.fmin(t0, t1), axis=1, initial=-np.inf), 0.0)
+    leave = np.fmin(np.nanmin(np.fmax(t0, t1), axis=1, initial=np.inf), end)
+    return enter <= leave
 
 
 # Shadow test against the reference ------------------------------------------------------------------

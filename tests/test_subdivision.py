@@ -533,6 +533,26 @@ def test_default_tessellation_meets_its_chord_tolerance():
     assert surface.chord_error(segments) <= 1e-3 * diagonal < surface.chord_error(segments // 2)
 
 
+def test_a_surface_far_from_the_origin_tessellates_as_at_the_origin():
+    """Moved 3e3 and 3e5 diagonals off the origin, a surface gets the origin's default segments and its
+    tessellation moved, to the float32 rounding of the moved coordinates (before: the offset's rounding
+    in the device's float32 evaluation kept the chord error above its tolerance, 256 segments)."""
+    surface = SubdivisionSurface.load(ccss("catmark_torus"))
+    at_origin = surface.tessellate()
+    diagonal = np.linalg.norm(np.ptp(surface.vertices, axis=0))
+    for sizes in (3e3, 3e5):
+        shift = sizes * diagonal * np.array([0.6, -0.3, 0.74])
+        move = np.eye(4)
+        move[:3, 3] = shift
+        moved = surface.transformed(move)
+        assert moved.default_segments() == surface.default_segments()
+        mesh = moved.tessellate()
+        assert np.array_equal(mesh.faces, at_origin.faces)
+        # float32 storage of coordinates ~|shift| (half an ulp), plus the origin's own evaluation rounding
+        tolerance = np.spacing(np.float32(np.abs(shift).max())) + POSITION_TOL * np.abs(surface.vertices).max()
+        compare("moved tessellation", mesh.vertices.astype(np.float64) - shift, at_origin.vertices, tolerance)
+
+
 def test_transformed_surface_is_the_transformed_limit(rng):
     surface = SubdivisionSurface.load(ccss("catmark_pole8"))
     matrix = np.eye(4)

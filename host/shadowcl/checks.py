@@ -68,7 +68,11 @@ def vertex_indices(name: str, corners: np.ndarray, n_vertices: int, sizes=None, 
 
 
 def vector3(name: str, value, nonzero: bool = False) -> np.ndarray:
-    """``value`` as a finite float64 3-vector (non-zero length if asked)."""
+    """``value`` as a finite float64 3-vector (non-zero length if asked); booleans and strings are not numbers."""
+    items = value if isinstance(value, (list, tuple)) else [value]
+    kind = getattr(value, "dtype", np.dtype(float)).kind
+    if kind in "bUSV" or any(isinstance(x, (bool, np.bool_, str, bytes)) for x in items):
+        raise TypeError(f"{name}: expected three numbers, got {value!r}")
     try:
         array = np.array(value, dtype=np.float64)   # a copy: stored vectors never share the caller's buffer
     except OverflowError:

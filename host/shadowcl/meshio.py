@@ -65,7 +65,7 @@ def read_polygons(path, suffixes=MESH_SUFFIXES, what: str = "mesh file") -> Poly
     path = path_argument("path", path)
     suffix = path.suffix.lower()
     if suffix not in suffixes:
-        raise ValueError(f"path: unsupported mesh format {suffix!r}; expected one of {suffixes}")
+        raise ValueError(f"path: {path}: unsupported mesh format {suffix!r}; expected one of {suffixes}")
     if not path.is_file():
         raise FileNotFoundError(f"path: no {what} at {path}")
     try:

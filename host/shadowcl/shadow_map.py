@@ -3,7 +3,8 @@
 ``prepare`` fits the light's view(s) to the receivers exactly as the exact method does
 (:func:`shadowcl.lightspace.fit_views`: orthographic for a directional light, one perspective view
 for a point light outside the receivers' box whose frustum stays within 120 degrees, else a cube of six
-faces), makes each window square, and draws each view's depth map with :func:`shadowcl.raster.depth_map`
+faces), cuts a single view's window to the occluders' projection (a receiver beyond it is lit:
+:func:`_cut_to_occluders`), makes each window square, and draws each view's depth map with :func:`shadowcl.raster.depth_map`
 (one rasterizer, two views; the maps stay on the device; with the default bias "plane" each texel also
 keeps the id of the triangle the light sees there). ``classify`` runs ``kernels/shadow_map.cl``: each
 receiver is transformed into light space and compared with what the map stored there.
@@ -133,6 +134,7 @@ CONSTANT_TAN = 2.0          # tan(theta) the "constant" bias covers (~63 degrees
 PLANE_CURVATURE = 1.0       # "plane": texels the surface may curve away from a stored plane per texel of reach
 NEAREST_REACH = math.sqrt(0.5)   # farthest a nearest texel's centre lies from the projection, in texels
 BILINEAR_REACH = 0.5
+EDGE_TEXELS = 2                  # empty texels round the occluders' projection, beyond the filter's reach
 FACE_MARGIN = 1e-5          # widening of the cube-face test, relative to the coordinates' size (float32: 6e-8)
 _GROUP = 64
 
@@ -219,7 +221,10 @@ class ShadowMapMethod(Method):
         corners = lightspace.box_corners(box - origin)
         # the near plane floor scales with the occluders: far receivers must not clip a light's close surroundings
         near = _cube_near(mesh, fitted.eye + origin, bounds_diagonal(mesh.bounds)) if fitted.kind == "cube" else None
-        views = [_view(fitted, k, origin, corners, near, scale, resolution) for k in range(fitted.nviews)]
+        occluder_corners = lightspace.box_corners(mesh.bounds - origin)
+        pad = math.ceil(self.reach()) + EDGE_TEXELS
+        views = [_view(fitted, k, origin, corners, near, scale, resolution, occluder_corners, pad)
+                 for k in range(fitted.nviews)]
         to_light = fitted.eye if fitted.perspective else -np.asarray(light.direction, dtype=np.float64)
         records = np.stack([record for _, record in views])
         self.maps = LightMaps(fitted.kind, origin, to_light, records, tuple(view for view, _ in views),
@@ -371,15 +376,46 @@ def _cube_near(mesh: Mesh, eye: np.ndarray, scale: float) -> float:
     return max(0.99 * nearest / math.sqrt(3), 1e-6 * scale)
 
 
+def _cut_to_occluders(fitted: lightspace.LightViews, k: int, occluder_corners: np.ndarray, resolution: int,
+                      pad: int) -> np.ndarray:
+    """Single view ``k``'s window (fitted to the receivers) cut to the projection of the occluders' box
+    (``occluder_corners``, relative to the maps' origin) widened by ``pad`` texels. A receiver projecting
+    beyond it is lit: its ray (segment to the eye) projects to that one point, which no occluder covers;
+    the kernel clamps it to an edge texel, which the pad keeps empty. Without the cut, receivers far
+    from the occluders (a second map for far receivers) spread the texels over their box and a
+    scene-sized occluder falls between texel centres (redteam: receivers 3 .. 1e4 sizes downstream of
+    a directional light all lost their shadow)."""
+    right, up, forward = fitted.axes[k]
+    if fitted.perspective:
+        d = occluder_corners - fitted.eye
+        w = d @ forward
+        u, v = (d @ right) / w, (d @ up) / w
+    else:
+        u, v = occluder_corners @ right, occluder_corners @ up
+    window = fitted.windows[k]
+    occluders = np.array([u.min(), u.max(), v.min(), v.max()])
+    cut = np.array([max(window[0], occluders[0]), min(window[1], occluders[1]),
+                    max(window[2], occluders[2]), min(window[3], occluders[3])])
+    if cut[0] > cut[1] or cut[2] > cut[3]:
+        return window          # no occluder in front of the receivers: every one is lit in any window
+    side = max(cut[1] - cut[0], cut[3] - cut[2], 1e-6 * max(window[1] - window[0], window[3] - window[2]))
+    margin = pad * side / (resolution - 2 * pad) if resolution > 4 * pad else side
+    # Only a side the occluders bound moves (padded); a side the receivers bound stays where it was.
+    padded = occluders + np.array([-margin, margin, -margin, margin])
+    return np.array([max(window[0], padded[0]), min(window[1], padded[1]), max(window[2], padded[2]), min(window[3], padded[3])])
+
+
 def _view(fitted: lightspace.LightViews, k: int, origin: np.ndarray, corners: np.ndarray, near: float | None,
-          scale: float, resolution: int) -> tuple[View, np.ndarray]:
+          scale: float, resolution: int, occluder_corners: np.ndarray, pad: int) -> tuple[View, np.ndarray]:
     """View ``k`` of ``fitted`` as a raster :class:`View` and the kernel's view record.
 
     ``corners`` (relative to ``origin``) bound every occluder and receiver: they set the depth range,
-    and the near plane of a single perspective view; ``near`` is the cube's.
+    and the near plane of a single perspective view; ``near`` is the cube's. A single view's window is
+    cut to the occluders (:func:`_cut_to_occluders`).
     """
     forward = fitted.axes[k][2]
-    u0, u1, v0, v1 = _square(fitted.windows[k])
+    window = fitted.windows[k] if fitted.kind == "cube" else _cut_to_occluders(fitted, k, occluder_corners, resolution, pad)
+    u0, u1, v0, v1 = _square(window)
     size = u1 - u0
     if fitted.perspective:
         far_ahead = None

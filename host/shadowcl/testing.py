@@ -1,11 +1,85 @@
-"""Test fixtures shared by tests/ and bench/ (not used by the library): hard cases of DESIGN.md made in code."""
+"""Test fixtures shared by tests/ and bench/ (not used by the library): hard cases of DESIGN.md made in
+code, and the judge of the working range (:func:`wrong_receivers`)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from .geometry import Mesh
+from .frame import is_distant, union
+from .geometry import Mesh, bounds_diagonal
+from .lights import DirectionalLight
+from .methods import method_class
+from .reference import exact as ref
 from .subdivision import PatchTable
+
+FLOAT_BAND = 1e-5   # of the scene's size: float32 rounding, as test_exact.py
+# Of the scene's size, the distance from a shadow edge within which a method's answer is its
+# discretisation's: a 2048-texel map over ~1.5x the scene is ~7e-4 a texel, the band four texels; the
+# angular rows are about one receiver spacing wide (eq. 4), ~0.35 on the 6 x 6 ground with 400
+# receivers, 4 % of the scene's size; the exact and shadow-volume methods have none.
+METHOD_BAND = {"exact": 0.0, "shadow_volume": 0.0, "shadow_map": 3e-3, "angular": 5e-2}
+
+
+def wrong_receivers(method: str, mesh: Mesh, light, points, mask, normals=None, eps=None):
+    """``(truth, wrong)``: the float64 brute force's mask of ``points`` (world coordinates, ``eps``
+    absolute, None: 1e-4 of ``mesh``'s diagonal) and the indices where ``method``'s ``mask`` differs
+    from it outside the band where the method may decide either way (:func:`free_receivers`)."""
+    points = np.asarray(points, dtype=np.float64)
+    eps = eps if eps is not None else 1e-4 * bounds_diagonal(mesh.bounds)
+    truth = ref.shadow_mask(mesh.vertices, mesh.faces, light, points, normals, eps)
+    wrong = np.flatnonzero(mask != truth)
+    if len(wrong):
+        reach = union(mesh.bounds, np.stack([points.min(0), points.max(0)]))
+        subset = None if normals is None else np.asarray(normals)[wrong]
+        wrong = wrong[~free_receivers(method, mesh, light, points[wrong], subset, eps, reach)]
+    return truth, wrong
+
+
+def grazing(light, points, normals) -> np.ndarray:
+    """bool (N,): receivers whose normal is within FLOAT_BAND radians of perpendicular to the light (or
+    that lie at a point light): the facing test ``n . (light - p) <= 0`` is a tie that float32 rounding
+    of any method's own arithmetic decides (a receiver in the light's plane, its normal in that plane)."""
+    if normals is None:
+        return np.zeros(len(points), dtype=bool)
+    n = np.asarray(normals, dtype=np.float64)
+    n = n / np.linalg.norm(n, axis=1, keepdims=True)
+    if isinstance(light, DirectionalLight):
+        to_light = np.broadcast_to(-np.asarray(light.direction, dtype=np.float64), n.shape)
+    else:
+        to_light = np.asarray(light.position, dtype=np.float64) - points
+    length = np.linalg.norm(to_light, axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cosine = np.einsum("ij,ij->i", n, to_light) / length
+    return (length == 0) | (np.abs(cosine) < FLOAT_BAND)
+
+
+def free_receivers(method: str, mesh: Mesh, light, points, normals, eps: float, reach: np.ndarray) -> np.ndarray:
+    """bool (N,): the receivers (world) where ``method`` may answer either way: the float32 band (the
+    segment within FLOAT_BAND of a triangle edge, or its nearest hit within FLOAT_BAND of the start or
+    the light, or a normal :func:`grazing` the light), the method's discretisation band (:data:`METHOD_BAND`), and, for a point light the
+    method is given as the directional light (beyond its ``point_light_reach`` of ``reach``, the box of
+    the occluders and all the query's receivers), where the two lights' brute forces differ, and that
+    directional light's own float32 band."""
+    v, f = mesh.vertices, mesh.faces
+    # The method's band is the occluders' (a far receiver must not widen it: that would hide a map
+    # coarsened by it); rounding grows with a receiver's own distance from them.
+    occluders = bounds_diagonal(mesh.bounds)
+    distance = np.linalg.norm(points - 0.5 * (mesh.bounds[0] + mesh.bounds[1]), axis=1)
+    band = np.maximum(FLOAT_BAND * np.maximum(occluders, distance), METHOD_BAND[method] * occluders)
+    lights = [light]
+    free = np.zeros(len(points), dtype=bool)
+    if is_distant(light, reach, method_class(method).point_light_reach):
+        parallel = DirectionalLight(0.5 * (reach[0] + reach[1]) - light.position)
+        free |= ref.shadow_mask(v, f, light, points, normals, eps) != ref.shadow_mask(v, f, parallel, points, normals, eps)
+        lights.append(parallel)   # the light the method answers for: its float32 band too (the point
+                                  # light's overflows in float64 beyond ~1e150)
+    for each in lights:
+        with np.errstate(over="ignore", invalid="ignore"):
+            free |= ref.segment_edge_distance(v, f, each, points, normals, eps) < band
+        free |= grazing(each, points, normals)
+        free |= ref.shadow_mask(v, f, each, points, normals, eps, margin=FLOAT_BAND * occluders) != \
+            ref.shadow_mask(v, f, each, points, normals, eps, margin=-FLOAT_BAND * occluders)
+    return free
 
 
 def icosphere(subdivisions: int) -> Mesh:

@@ -261,7 +261,22 @@ class SubdivisionSurface:
         if segments is None:
             segments = self.default_segments(device=device)
         face, u, v, triangles, _ = tessellation(self.faces, segments)
-        return Mesh(self.evaluate(face, u, v, device=device), triangles)
+        centred, centre = self._centred
+        return Mesh(centred.evaluate(face, u, v, device=device).astype(np.float64) + centre, triangles)
+
+    @cached_property
+    def _centred(self) -> "tuple[SubdivisionSurface, np.ndarray]":
+        """(this surface moved to its control box's centre, that centre): the device evaluates in float32,
+        so a surface far from the origin is evaluated there and moved back in float64. Without it the
+        limit points of a surface 3e3 diagonals off the origin carried the offset's rounding (1e-3 of
+        its size), the chord error never fell below the tolerance and the default tessellation went to
+        256 segments (4 M triangles, 136 of 400 receivers' shadows changed; bench/redteam.py)."""
+        centre = 0.5 * (self.vertices.min(axis=0) + self.vertices.max(axis=0)).astype(np.float64)
+        if np.linalg.norm(centre) <= np.linalg.norm(self.vertices.max(axis=0) - self.vertices.min(axis=0)):
+            return self, np.zeros(3)
+        move = np.eye(4)
+        move[:3, 3] = -centre
+        return self.transformed(move), centre
 
     def default_segments(self, tolerance: float = TESSELLATION_TOLERANCE, device=None) -> int:
         """The smallest power of two of segments per control edge whose :meth:`chord_error` is within
@@ -280,9 +295,10 @@ class SubdivisionSurface:
         centre moves sideways within the tangent plane; that moves no surface and casts no shadow.
         """
         face, u, v, triangles, centres = tessellation(self.faces, segments)
-        corners = self.evaluate(face, u, v, device=device).astype(np.float64)
-        centre = self.evaluate(*centres, device=device).astype(np.float64)
-        normal = self.limit_normals(*centres, device=device).astype(np.float64)
+        surface = self._centred[0]     # the error does not move with the surface; float32 rounding does
+        corners = surface.evaluate(face, u, v, device=device).astype(np.float64)
+        centre = surface.evaluate(*centres, device=device).astype(np.float64)
+        normal = surface.limit_normals(*centres, device=device).astype(np.float64)
         # Cells are triangle pairs (p00, p10, p11), (p00, p11, p01): p00-p11 is the cell's diagonal.
         first = triangles[0::2]
         midpoint = (corners[first[:, 0]] + corners[first[:, 2]]) / 2.0
