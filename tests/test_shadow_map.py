@@ -540,3 +540,20 @@ def test_a_point_light_a_million_scene_sizes_away(device, rng, distance):
         error = mask_error(method.classify(points, given), truth)
         # the edge band: about a texel (6 / 1024 of the floor) along a shadow outline of ~8 units
         assert error.fraction <= 0.001, (distance, given is not None, error)
+
+
+def test_window_is_not_cut_to_an_occluder_box_reaching_behind_the_light(device):
+    """A single perspective view whose occluders' box reaches behind the light (a quad above it, others
+    below) must keep its window: the corners behind project mirrored, and a window cut to them lost
+    the shadows of the occluders in front (1,201 of 1,246 shadowed receivers came out lit)."""
+    def quad_y(y, x0, x1, z0, z1):
+        return np.array([(x0, y, z0), (x1, y, z0), (x1, y, z1), (x0, y, z1)], float)
+    parts = [quad_y(-2.9, -0.1, 0.1, -0.1, 0.1), quad_y(-0.5, 0.55, 0.65, -0.2, 0.2), quad_y(1.0, -0.1, 0.1, -0.1, 0.1)]
+    mesh = sc.Mesh(np.concatenate(parts), np.concatenate([np.array([[0, 1, 2], [0, 2, 3]]) + 4 * i for i in range(3)]))
+    light = sc.PointLight((0.0, 0.0, 0.0))
+    rng = np.random.default_rng(0)
+    points = np.c_[rng.uniform(-4, 4, 20_000), np.full(20_000, -3.0), rng.uniform(-1.5, 1.5, 20_000)]
+    truth = sc.shadow_mask(mesh, light, points, method="exact", device=device)
+    for resolution in (512, 2048):
+        got = sc.shadow_mask(mesh, light, points, method="shadow_map", device=device, resolution=resolution)
+        assert truth.sum() > 1000 and np.count_nonzero(truth & ~got) <= 0.01 * truth.sum(), resolution

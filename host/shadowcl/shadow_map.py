@@ -389,6 +389,10 @@ def _cut_to_occluders(fitted: lightspace.LightViews, k: int, occluder_corners: n
     if fitted.perspective:
         d = occluder_corners - fitted.eye
         w = d @ forward
+        if np.any(w <= 0):
+            # the box reaches behind the eye: its corners there project mirrored, and the occluders in
+            # front may project anywhere in the window, so it is not cut (a room round the light)
+            return fitted.windows[k]
         u, v = (d @ right) / w, (d @ up) / w
     else:
         u, v = occluder_corners @ right, occluder_corners @ up
