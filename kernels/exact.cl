@@ -221,7 +221,7 @@ INLINE lint packet_hits(const Packet *p, __global const float *tris, int t)
     return dot5_hit(p->sx, p->sy, p->sz, p->dx, p->dy, p->dz, tris + DOT5_FLOATS * t, p->tmin, (lfloat)TMAX);
 #else
     __global const float *r = tris + WT_FLOATS * t;
-    const lint culled = wt_culled(r, p->sx, p->sy, p->sz);
+    const lint culled = wt_culled(r, p->sx, p->sy, p->sz, p->dx, p->dy, p->dz, p->tmin);
     if (!LANE_ANY(!culled))
         return (lint)0;
     return (!culled) & wt_hit(&p->ray, r[0], r[1], r[2], r[3], r[4], r[5], r[6], r[7], r[8], p->tmin, (lfloat)TMAX);

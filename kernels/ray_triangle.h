@@ -174,16 +174,21 @@ INLINE lint wt_hit(const WtRay *r, float v0x, float v0y, float v0z, float v1x, f
 #define WT_FLOATS 16
 #define NORMAL_ULPS 8.0f   /* the cross product's rounding, in FLT_EPSILON, that the cull allows for */
 
-/* Plane cull: 1 when the segment from s to the light certainly stays on one side of the triangle's
- * plane (s and the light both farther than their rounding bounds from it, on the same side), so no
- * test can hit. A segment through a shared edge or vertex crosses both planes there, so the cull never
- * removes one; it only skips triangles the segment does not reach. Degenerate triangles (n = 0) are
- * never culled (their test says no hit). */
-INLINE lint wt_culled(__global const float *t, lfloat sx, lfloat sy, lfloat sz)
+/* Plane cull: 1 when the tested part of the segment, from s + tmin d (a hit counts only beyond tmin) to
+ * the light, certainly stays on one side of the triangle's plane (both ends farther than their rounding
+ * bounds from it, on the same side), so no test can hit. A segment through a shared edge or vertex
+ * crosses both planes there, so the cull never removes one; it only skips triangles the segment does
+ * not reach. Starting at tmin rather than at s culls the plane a receiver lies on (a point on a face,
+ * given without normals): measured on the default scene's ground, one-shot 101 -> ~60 ms. The bound
+ * covers s - v0 (exact near v0) and the tmin d step with the record's relative bound. Degenerate
+ * triangles (n = 0) are never culled (their test says no hit). */
+INLINE lint wt_culled(__global const float *t, lfloat sx, lfloat sy, lfloat sz, lfloat dx, lfloat dy, lfloat dz,
+                      lfloat tmin)
 {
-    const lfloat a0 = sx - t[0], a1 = sy - t[1], a2 = sz - t[2];
+    const lfloat a0 = (sx - t[0]) + tmin * dx, a1 = (sy - t[1]) + tmin * dy, a2 = (sz - t[2]) + tmin * dz;
     const lfloat fs = t[9] * a0 + t[10] * a1 + t[11] * a2;
-    const lfloat es = t[14] * (SC_LABS(a0) + SC_LABS(a1) + SC_LABS(a2));
+    const lfloat es = t[14] * (SC_LABS(a0) + SC_LABS(a1) + SC_LABS(a2) +
+                               tmin * (SC_LABS(dx) + SC_LABS(dy) + SC_LABS(dz)));
     const float fl = t[12], el = t[13];        /* the light's side: one per triangle */
     return (fl > el) ? (fs > es) : ((fl < -el) ? (fs < -es) : (lint)0);
 }
