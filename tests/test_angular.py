@@ -677,7 +677,7 @@ def test_fills_never_write_past_their_rows(device, monkeypatch, table, kernel):
     a fill drops the writes past each row's end and the host raises, naming the kernel, instead of
     writing out of bounds or returning a short table."""
     counts = angular.row_counts
-    monkeypatch.setattr(angular, "row_counts", lambda *args: counts(*args) // 4)
+    monkeypatch.setattr(angular.table, "row_counts", lambda *args: counts(*args) // 4)   # where build_table looks it up
     with pytest.raises(RuntimeError, match=f"angular {kernel} met .* entries more than its count made room for"):
         prepared(device, torus_over_plane(), sc.PointLight((0.3, 3.0, 0.2)), ground_points(np.random.default_rng(2), 10),
                  theta_resolution=64, table=table)
