@@ -40,21 +40,12 @@
 #ifndef NORMALS
 #define NORMALS 0
 #endif
-#ifndef INPUT_F64
-#define INPUT_F64 0
-#endif
-#if INPUT_F64
-#pragma OPENCL EXTENSION cl_khr_fp64 : enable
-typedef double real_in;
-#else
-typedef float real_in;
-#endif
 
 /* Receiver i in the frame, relative to the anchor (a point of the occluders, frame coordinates ax, ay, az:
  * see ANCHOR_ARGS): p = rot (row-major 3x3) @ (world - origin) - anchor in double for world input (the
  * normal rotated and normalised); float32 input is read as it is (the host moved it there already). */
-INLINE void load_receiver(const __global real_in *points, const __global real_in *normals, int i,
-                          const __global real_in *rot, real_in ox, real_in oy, real_in oz,
+INLINE void load_receiver(const __global input_t *points, const __global input_t *normals, int i,
+                          const __global input_t *rot, input_t ox, input_t oy, input_t oz,
                           const float ax, const float ay, const float az,
                           float *px, float *py, float *pz, float *nx, float *ny, float *nz)
 {
@@ -721,8 +712,8 @@ INLINE int row_lookup(const __global float *records, const __global float *rel, 
 
 /* angular_classify: one work-item per receiver (frame coordinates, unit frame normals when NORMALS).
  * out[i] = 1 in shadow, 0 lit: row_lookup, first hit wins. */
-__kernel void angular_classify(const __global real_in *points, const __global real_in *normals, const int n,
-                               const __global real_in *rot, const real_in ox, const real_in oy, const real_in oz,
+__kernel void angular_classify(const __global input_t *points, const __global input_t *normals, const int n,
+                               const __global input_t *rot, const input_t ox, const input_t oy, const input_t oz,
                                const float anc_x, const float anc_y, const float anc_z, const float t0, const float inv_dt, const int rows, const float eps,
                                const __global int *offsets, const __global float *records,
                                const __global float *rel, const __global int *faces, __global uchar *out)
@@ -758,8 +749,8 @@ INLINE bool record_hits(const __global float *records, const __global float *rel
  *    other span can contain a receiver in the interval, so re-testing those two decides it.
  * Anything else makes a full lookup: the result is bit for bit the per-receiver one.
  * lookups[l] counts the full lookups of line l. */
-__kernel void angular_runs(const __global real_in *points, const __global real_in *normals,
-                           const __global real_in *rot, const real_in ox, const real_in oy, const real_in oz,
+__kernel void angular_runs(const __global input_t *points, const __global input_t *normals,
+                           const __global input_t *rot, const input_t ox, const input_t oy, const input_t oz,
                            const float anc_x, const float anc_y, const float anc_z, const __global int *line_start, const int lines, const float t0, const float inv_dt, const int rows, const float eps,
                            const __global int *offsets, const __global float *records,
                            const __global float *rel, const __global int *faces, __global uchar *out,

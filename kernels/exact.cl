@@ -52,16 +52,6 @@
 #ifndef LISTS_LINKED
 #define LISTS_LINKED 0
 #endif
-#ifndef INPUT_F64
-#define INPUT_F64 0
-#endif
-
-#if INPUT_F64
-#pragma OPENCL EXTENSION cl_khr_fp64 : enable
-typedef double input_t;
-#else
-typedef float input_t;
-#endif
 
 #define SC_FINITE(x) ((x) - (x) == 0.0f)
 #define WALK 0              /* receiver_start: the receiver needs a walk */

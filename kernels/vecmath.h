@@ -101,4 +101,16 @@ INLINE float dot3(float ax, float ay, float az, float bx, float by, float bz)
         (z) = (arr)[_b + 2];              \
     } while (0)
 
+/* The precision of a call's input arrays: INPUT_F64 1 reads the caller's float64 points and normals as
+ * they are (needs cl_khr_fp64: the kernels move and round them as the host would), 0 float32. */
+#ifndef INPUT_F64
+#define INPUT_F64 0
+#endif
+#if INPUT_F64
+#pragma OPENCL EXTENSION cl_khr_fp64 : enable
+typedef double input_t;
+#else
+typedef float input_t;
+#endif
+
 #endif

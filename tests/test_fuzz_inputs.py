@@ -91,6 +91,15 @@ def load_or_named_error(path) -> "sc.Mesh | None":
     return mesh
 
 
+def parsed(read, data: bytes):
+    """A mesh reader's polygons as lists, or its error message: what two readers of one file must agree on."""
+    try:
+        polygons = read(data)
+    except ValueError as error:
+        return str(error)
+    return polygons.vertices.tolist(), polygons.corners.tolist(), polygons.sizes.tolist()
+
+
 @FUZZ
 @given(mesh=meshes(), fmt=st.sampled_from(FORMATS))
 def test_written_meshes_load_exactly(tmp_path, mesh, fmt):
@@ -381,14 +390,7 @@ def test_bulk_obj_agrees_with_the_line_parser(records, newline):
     data = newline.join(keyword + separator + separator.join(tokens)
                         for keyword, tokens, separator in records).encode("latin-1")
 
-    def outcome(read):
-        try:
-            polygons = read(data)
-        except ValueError as error:
-            return str(error)
-        return polygons.vertices.tolist(), polygons.corners.tolist(), polygons.sizes.tolist()
-
-    assert outcome(meshio._read_obj) == outcome(meshio._read_obj_by_line)
+    assert parsed(meshio._read_obj, data) == parsed(meshio._read_obj_by_line, data)
 
 
 def test_bulk_obj_reads_the_common_forms():
@@ -471,14 +473,7 @@ def test_bulk_ascii_stl_agrees_with_the_line_parser(facets, hostile, newline):
         lines.insert(min(at, len(lines)), line)
     data = newline.join(lines).encode("latin-1")
 
-    def outcome(read):
-        try:
-            polygons = read(data)
-        except ValueError as error:
-            return str(error)
-        return polygons.vertices.tolist(), polygons.corners.tolist(), polygons.sizes.tolist()
-
-    assert outcome(meshio._read_stl) == outcome(meshio._read_ascii_stl_by_line)
+    assert parsed(meshio._read_stl, data) == parsed(meshio._read_ascii_stl_by_line, data)
     if not hostile and facets:
         assert meshio._read_ascii_stl_bulk(data) is not None
 

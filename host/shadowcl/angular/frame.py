@@ -116,6 +116,15 @@ def angular_frame(light, occluder_points: np.ndarray, prefer_x=None) -> tuple[np
     return origin, np.stack([x_axis, y_axis, z_axis])
 
 
+def around_pole(y: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """bool (F,): triangles with corner coordinates ``y``, ``z`` ((F, 3) frame Y and Z) whose projection on
+    the YZ plane holds the origin, i.e. the pole axis X crosses them (edge functions of one sign; on an
+    edge counts)."""
+    u, v = y, -z
+    e = [u[:, i] * v[:, (i + 1) % 3] - v[:, i] * u[:, (i + 1) % 3] for i in range(3)]
+    return ((e[0] >= 0) & (e[1] >= 0) & (e[2] >= 0)) | ((e[0] <= 0) & (e[1] <= 0) & (e[2] <= 0))
+
+
 def row_coordinate(local: np.ndarray, point: bool) -> np.ndarray:
     """theta = atan2(Y, -Z) (point light) or Y (directional) of frame positions (float64)."""
     return np.arctan2(local[:, 1], -local[:, 2]) if point else local[:, 1].copy()

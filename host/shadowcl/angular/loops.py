@@ -11,6 +11,7 @@ import numpy as np
 from ..geometry import Mesh
 from ..silhouette import silhouette_edges, silhouette_loops
 from ..topology import components, concave_edges
+from .frame import around_pole
 
 
 def ridge_loops(device, mesh: Mesh, light):
@@ -94,9 +95,7 @@ def pole_hits(adjacency, facing: np.ndarray, regions: np.ndarray, local) -> tupl
         return np.zeros(0), np.zeros(0, dtype=np.int32)
     lit = np.flatnonzero(facing)
     tri = np.asarray(local, dtype=np.float64)[adjacency.faces[lit]]
-    u, v = tri[:, :, 1], -tri[:, :, 2]
-    e = [u[:, i] * v[:, (i + 1) % 3] - v[:, i] * u[:, (i + 1) % 3] for i in range(3)]
-    around = ((e[0] >= 0) & (e[1] >= 0) & (e[2] >= 0)) | ((e[0] <= 0) & (e[1] <= 0) & (e[2] <= 0))
+    around = around_pole(tri[:, :, 1], tri[:, :, 2])
     tri = tri[around]
     n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     ok = np.abs(n[:, 0]) > 0

@@ -15,7 +15,7 @@ from ..points import check_points
 from ..lightspace import box_corners
 from ..silhouette import edge_adjacency, silhouette_edges, silhouette_loops
 from .frame import (ANGLE_PAD, LENGTH_PAD, MAX_ROWS, MIN_ROWS, PIECES, POLE_CLEARANCE, S_PAD, Frame, _pole_clearance,
-                    _unit_directions, angular_frame, row_coordinate, rows_from_receivers)
+                    _unit_directions, angular_frame, around_pole, row_coordinate, rows_from_receivers)
 from .loops import LoopSet, check_even_count, concave_creases, edge_regions, lit_regions, pole_hits
 from .table import Table, build_table, frame_options, table_entries
 
@@ -320,6 +320,4 @@ def _same_axis(a, b) -> bool:
 
 def _around_pole(local: np.ndarray, faces: np.ndarray) -> bool:
     """Whether any triangle's projection on the YZ plane contains the origin (the pole axis crosses it)."""
-    u, v = local[:, 1][faces], -local[:, 2][faces]
-    e = [u[:, i] * v[:, (i + 1) % 3] - v[:, i] * u[:, (i + 1) % 3] for i in range(3)]
-    return bool(np.any(((e[0] >= 0) & (e[1] >= 0) & (e[2] >= 0)) | ((e[0] <= 0) & (e[1] <= 0) & (e[2] <= 0))))
+    return bool(np.any(around_pole(local[:, 1][faces], local[:, 2][faces])))
