@@ -1,4 +1,6 @@
 /* angular.cl: the discretized shadow volume in angular coordinates (Thakur, Cheng & Miura).
+ * Host: the package host/shadowcl/angular/ (frame, loops, table, method); NumPy reference:
+ * host/shadowcl/reference/angular.py; tests: tests/test_angular.py.
  *
  * Frame (the host moves geometry into it in float64, then rounds): point light at the origin;
  * a "row" is a half-plane through the X axis (the poles are +-X), at angle

@@ -1,5 +1,7 @@
 /* silhouette.cl: brute-force silhouette (ridge) edges against a point or directional light, and the
  * walks that track them from frame to frame (at the end of the file).
+ * Host: the package host/shadowcl/silhouette/ (classify, loops, tracking); NumPy reference:
+ * host/shadowcl/reference/silhouette.py; tests: tests/test_silhouette.py.
  *
  * Two passes, one work-item per face then one per edge: each face's facing is computed once (an
  * edge-only kernel would recompute every face for each of its three edges), and the facing array is

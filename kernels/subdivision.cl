@@ -1,4 +1,6 @@
-/* subdivision.cl: limit-surface evaluation of a patch table (host: host/shadowcl/subdivision.py). */
+/* subdivision.cl: limit-surface evaluation of a patch table. Host: the package host/shadowcl/subdivision/
+ * (surface.py launches it); NumPy reference: host/shadowcl/reference/subdivision.py; tests:
+ * tests/test_subdivision.py. */
 #include "subdivision.h"
 
 /* evaluate: for each query q < n, the limit position of patch[q] at (u[q], v[q]) in that patch's own
