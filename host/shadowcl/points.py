@@ -126,8 +126,9 @@ class MovedPoints(Points):
         return moved
 
     def subset(self, index) -> Points:
-        world = self.world.subset(index)
-        return Points(self._move(world.positions), world.normals, _bounds(self._move(world.positions)))
+        moved = self._move(self.world.positions[index])
+        normals = None if self.normals is None else np.ascontiguousarray(self.normals[index])
+        return Points(moved, normals, _bounds(moved))
 
     def near(self, point: np.ndarray, reach: float) -> np.ndarray:
         # narrowed in the world first (a column pass over the caller's array, no move of them all), then
