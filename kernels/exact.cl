@@ -54,7 +54,7 @@
 #endif
 
 #define SC_FINITE(x) ((x) - (x) == 0.0f)
-#define WALK 0              /* receiver_start: the receiver needs a walk */
+#define WALK 0              /* receivers_start: the receiver needs a walk */
 
 #if LIGHT_POINT
 #define TMAX 1.0f           /* t in units of |light - s| */
@@ -62,50 +62,80 @@
 #define TMAX SC_BIG
 #endif
 
-/* Receiver i's start s (relative float32) and tmin, or its code when it needs no walk (1, 3, 4). */
-INLINE int receiver_start(int i, __global const input_t *points, __global const input_t *normals,
-                          input_t cx, input_t cy, input_t cz, input_t inv_scale, input_t ox, input_t oy,
-                          input_t oz, float lx, float ly, float lz, float eps, int with_normals, float *px,
-                          float *py, float *pz, float *ptmin)
+/* Receiver i moved into the working frame ((x - c) * inv_scale) and made relative to (ox, oy, oz) in the
+ * input precision (the host's bits), rounded to float32 in *px, *py, *pz: 3 when it is not finite, else WALK. */
+INLINE int receiver_point(int i, __global const input_t *points, input_t cx, input_t cy, input_t cz, input_t inv_scale,
+                          input_t ox, input_t oy, input_t oz, float *px, float *py, float *pz)
 {
-    /* the frame's move (x - c) / 2^k, then the local origin, in the input precision: the host's bits */
-    float sx = (float)((points[3 * i] - cx) * inv_scale - ox), sy = (float)((points[3 * i + 1] - cy) * inv_scale - oy),
-          sz = (float)((points[3 * i + 2] - cz) * inv_scale - oz);
-    if (!(SC_FINITE(sx) & SC_FINITE(sy) & SC_FINITE(sz)))
-        return 3;
-    /* Back-facing receivers are in shadow; the others start eps along their (unit) normal */
-    if (with_normals) {
-#if LIGHT_POINT
-        const float dx = lx - sx, dy = ly - sy, dz = lz - sz;
-#else
-        const float dx = -lx, dy = -ly, dz = -lz;
-#endif
-        const input_t mx = normals[3 * i], my = normals[3 * i + 1], mz = normals[3 * i + 2];
-        float nx_ = (float)mx, ny_ = (float)my, nz_ = (float)mz;
-        float len2 = nx_ * nx_ + ny_ * ny_ + nz_ * nz_;
-        if (!(len2 > 1.0e-30f && len2 < 1.0e30f)) {
-            /* tiny, huge or invalid: rescale in the input precision first */
-            const input_t big = (mx < 0 ? -mx : mx) > (my < 0 ? -my : my) ? (mx < 0 ? -mx : mx) : (my < 0 ? -my : my);
-            const input_t scale = big > (mz < 0 ? -mz : mz) ? big : (mz < 0 ? -mz : mz);
-            if (!(scale > 0) || !(mx - mx == 0) || !(my - my == 0) || !(mz - mz == 0))
-                return 4;
-            nx_ = (float)(mx / scale); ny_ = (float)(my / scale); nz_ = (float)(mz / scale);
-            len2 = nx_ * nx_ + ny_ * ny_ + nz_ * nz_;
-        }
-        const float inv = 1.0f / SC_SQRT(len2);
-        nx_ *= inv; ny_ *= inv; nz_ *= inv;
-        if (dot3(nx_, ny_, nz_, dx, dy, dz) <= 0.0f)
-            return 1;
-        sx += eps * nx_; sy += eps * ny_; sz += eps * nz_;
+    const float x = (float)((points[3 * i] - cx) * inv_scale - ox), y = (float)((points[3 * i + 1] - cy) * inv_scale - oy),
+                z = (float)((points[3 * i + 2] - cz) * inv_scale - oz);
+    *px = x; *py = y; *pz = z;
+    return (SC_FINITE(x) & SC_FINITE(y) & SC_FINITE(z)) ? WALK : 3;
+}
+
+/* Receiver i's normal in float32, not yet unit: rescaled in the input precision first when its squared
+ * length would under- or overflow float32. 4 when it is zero or not finite, else WALK. */
+INLINE int receiver_normal(int i, __global const input_t *normals, float *nx, float *ny, float *nz)
+{
+    const input_t mx = normals[3 * i], my = normals[3 * i + 1], mz = normals[3 * i + 2];
+    float x = (float)mx, y = (float)my, z = (float)mz;
+    const float len2 = x * x + y * y + z * z;
+    if (!(len2 > 1.0e-30f && len2 < 1.0e30f)) {
+        const input_t big = (mx < 0 ? -mx : mx) > (my < 0 ? -my : my) ? (mx < 0 ? -mx : mx) : (my < 0 ? -my : my);
+        const input_t scale = big > (mz < 0 ? -mz : mz) ? big : (mz < 0 ? -mz : mz);
+        if (!(scale > 0) || !(mx - mx == 0) || !(my - my == 0) || !(mz - mz == 0))
+            return 4;
+        x = (float)(mx / scale); y = (float)(my / scale); z = (float)(mz / scale);
     }
-#if LIGHT_POINT
-    const float dx = lx - sx, dy = ly - sy, dz = lz - sz;
-    *ptmin = eps / SC_SQRT(dot3(dx, dy, dz, dx, dy, dz));
-#else
-    *ptmin = eps;
-#endif
-    *px = sx; *py = sy; *pz = sz;
+    *nx = x; *ny = y; *nz = z;
     return WALK;
+}
+
+/* The lanes' receivers base + j (lanes past n repeat receiver n - 1): their codes (WALK, or 1 for a
+ * normal facing away from the light, 3, 4: see the top) and the starts s of those to walk, s = p + eps n
+ * with n made unit (p without normals). The per-receiver loads are scalar; the arithmetic is over lanes. */
+INLINE lint receivers_start(int base, int n, __global const input_t *points, __global const input_t *normals,
+                            input_t cx, input_t cy, input_t cz, input_t inv_scale, input_t ox, input_t oy, input_t oz,
+                            float lx, float ly, float lz, float eps, int with_normals, lfloat *psx, lfloat *psy,
+                            lfloat *psz)
+{
+    float px[LANES], py[LANES], pz[LANES], mx[LANES], my[LANES], mz[LANES];
+    int code[LANES];
+    for (int j = 0; j < LANES; ++j) {
+        const int i = min(base + j, n - 1);
+        code[j] = receiver_point(i, points, cx, cy, cz, inv_scale, ox, oy, oz, &px[j], &py[j], &pz[j]);
+        mx[j] = my[j] = mz[j] = 1.0f;
+        if (with_normals && code[j] == WALK)
+            code[j] = receiver_normal(i, normals, &mx[j], &my[j], &mz[j]);
+    }
+    lfloat sx = LANE_LOAD(float, px), sy = LANE_LOAD(float, py), sz = LANE_LOAD(float, pz);
+    lint codes = LANE_LOAD(int, code);
+    if (with_normals) {
+        lfloat nx = LANE_LOAD(float, mx), ny = LANE_LOAD(float, my), nz = LANE_LOAD(float, mz);
+        const lfloat inv = 1.0f / LANE_SQRT(nx * nx + ny * ny + nz * nz);
+        nx *= inv; ny *= inv; nz *= inv;
+#if LIGHT_POINT
+        const lfloat dx = lx - sx, dy = ly - sy, dz = lz - sz;
+#else
+        const lfloat dx = (lfloat)(-lx), dy = (lfloat)(-ly), dz = (lfloat)(-lz);
+#endif
+        codes = ((codes == WALK) & (nx * dx + ny * dy + nz * dz <= 0.0f)) ? (lint)1 : codes;
+        sx += eps * nx; sy += eps * ny; sz += eps * nz;
+    }
+    *psx = sx; *psy = sy; *psz = sz;
+    return codes;
+}
+
+/* The start of the tested part of the lanes' segments, in units of the segment (point light) or of
+ * length (directional): a hit counts only beyond eps from s. */
+INLINE lfloat start_tmin(lfloat sx, lfloat sy, lfloat sz, float lx, float ly, float lz, float eps)
+{
+#if LIGHT_POINT
+    const lfloat dx = lx - sx, dy = ly - sy, dz = lz - sz;
+    return eps / LANE_SQRT(dx * dx + dy * dy + dz * dz);
+#else
+    return (lfloat)eps;
+#endif
 }
 
 /* The fine cell a started receiver is binned in (brute_cell when the view cannot place it), and in
@@ -123,55 +153,72 @@ INLINE int receiver_cell(__constant const float *views, int brute_cell, float sx
     return cell;
 }
 
+/* The coarse cell of a receiver binned in fine cell `cell` (-1 for brute_cell), as receiver_cell gives */
+INLINE int receiver_coarse(__constant const float *views, int brute_cell, int cell)
+{
+    return (cell == brute_cell) ? -1 : ls_coarse_cell(views, cell);
+}
+
+/* A binned receiver: its start s and its fine cell (16 bytes: the count pass's output, the fill's
+ * scattered record, the walk's input) */
+typedef struct {
+    float x, y, z;
+    int cell;
+} Start;
+
 #define BIN_ARGS                                                                                     \
     __global const input_t *points, __global const input_t *normals, int n, input_t cx, input_t cy,  \
         input_t cz, input_t inv_scale, input_t ox, input_t oy, input_t oz, __constant const float *views, \
         int brute_cell, float lx, float ly, float lz, float eps, int with_normals
 
-/* Pass 1. Contract: points (n x 3, float32 relative to the local origin, or float64 with INPUT_F64,
- * the frame's move in (cx, cy, cz, inv_scale) and the origin in (ox, oy, oz)), normals likewise if with_normals (any non-zero length); views:
- * the grid the lists were built on; counts: brute_cell + 1 ints, zeroed. Writes out[i] (the code of a
- * receiver needing no walk, else 0) and slot[i] (its rank in its cell, -1 when it needs no walk); for a
- * receiver with a slot, start[i] = (s, tmin). */
+/* Pass 1, LANES receivers per work-item. Contract: points (n x 3, float32 relative to the local origin,
+ * or float64 with INPUT_F64, the frame's move in (cx, cy, cz, inv_scale) and the origin in (ox, oy,
+ * oz)), normals likewise if with_normals (any non-zero length); views: the grid the lists were built on;
+ * counts: brute_cell + 1 ints, zeroed. Writes out[i] (the code of a receiver needing no walk, else 0)
+ * and slot[i] (its rank in its cell, -1 when it needs no walk); for a receiver with a slot, start[i]. */
 __kernel void exact_bin_count(BIN_ARGS, __global int *counts, __global int *slot, __global uchar *out,
-                              __global float4 *start)
+                              __global Start *start)
 {
-    const int i = get_global_id(0);
-    if (i >= n)
+    const int base = LANES * get_global_id(0);
+    if (base >= n)
         return;
-    float sx, sy, sz, tmin;
-    int coarse, s = -1;
-    const int code = receiver_start(i, points, normals, cx, cy, cz, inv_scale, ox, oy, oz, lx, ly, lz, eps, with_normals,
-                                    &sx, &sy, &sz, &tmin);
-    if (code == WALK) {
-        const int fine = receiver_cell(views, brute_cell, sx, sy, sz, &coarse);
-        start[i] = (float4)(sx, sy, sz, tmin);
-        s = atomic_inc(&counts[fine]);
+    lfloat sx, sy, sz;
+    const lint codes = receivers_start(base, n, points, normals, cx, cy, cz, inv_scale, ox, oy, oz, lx, ly, lz, eps,
+                                       with_normals, &sx, &sy, &sz);
+    float x[LANES], y[LANES], z[LANES];
+    int code[LANES];
+    LANE_STORE(sx, x); LANE_STORE(sy, y); LANE_STORE(sz, z); LANE_STORE(codes, code);
+    for (int j = 0; j < LANES && base + j < n; ++j) {
+        const int i = base + j;
+        int s = -1;
+        if (code[j] == WALK) {
+            int coarse;
+            const int cell = receiver_cell(views, brute_cell, x[j], y[j], z[j], &coarse);
+            const Start r = {x[j], y[j], z[j], cell};
+            start[i] = r;
+            s = atomic_inc(&counts[cell]);
+        }
+        slot[i] = s;
+        out[i] = (uchar)code[j];
     }
-    slot[i] = s;
-    out[i] = (uchar)code;
 }
 
 /* Pass 2: every receiver with a slot copies its start to binned[k] and its index to index[k], k =
- * offsets[its fine cell] + its slot (offsets: the exclusive prefix sum of pass 1's counts), so that
- * they list the receivers cell by cell. The cell is found again from the start (the same arithmetic
- * on the same floats: the same cell), cheaper than storing it: the scattered writes are the cost.
- * A slot past its cell's end (a cell differing from pass 1's: a bug) is not written but counted in
+ * offsets[its cell] + its slot (offsets: the exclusive prefix sum of pass 1's counts), so that they
+ * list the receivers cell by cell. A slot past its cell's end (a bug) is not written but counted in
  * *dropped, which the host checks. */
-__kernel void exact_bin_fill(int n, __constant const float *views, int brute_cell, __global const float4 *start,
-                             __global const int *slot, __global const int *offsets, __global float4 *binned,
-                             __global int *index, __global volatile int *dropped)
+__kernel void exact_bin_fill(int n, __global const Start *start, __global const int *slot,
+                             __global const int *offsets, __global Start *binned, __global int *index,
+                             __global volatile int *dropped)
 {
     const int i = get_global_id(0);
     if (i >= n)
         return;
     const int s = slot[i];
     if (s >= 0) {
-        const float4 r = start[i];
-        int coarse;
-        const int cell = receiver_cell(views, brute_cell, r.x, r.y, r.z, &coarse);
-        const int k = offsets[cell] + s;
-        if (k < offsets[cell + 1]) {
+        const Start r = start[i];
+        const int k = offsets[r.cell] + s;
+        if (k < offsets[r.cell + 1]) {
             binned[k] = r;
             index[k] = i;
         } else {
@@ -269,27 +316,29 @@ INLINE lint walk_cells(const int *cell, lint valid, lint hit, const Packet *p, _
 
 /* Pass 3. Contract: binned, index: nbinned starts and receiver indices of pass 2; views: the grid; tris: triangle
  * records (see TEST_DOT5); lists_a, lists_b: (offsets, items) or (heads, nodes) over the grid's cells;
- * (lx, ly, lz): light position (relative) or direction; walk_coarse: 0 when no primitive is coarse
- * (the coarse lists are empty). Writes out[index] for every binned receiver (of n). */
-NOINLINE void exact_classify_item(int base, __global const float4 *binned, __global const int *binned_index,
+ * (lx, ly, lz): light position (relative) or direction; eps: as pass 1's; walk_coarse: 0 when no
+ * primitive is coarse (the coarse lists are empty). Writes out[index] for every binned receiver (of n). */
+NOINLINE void exact_classify_item(int base, __global const Start *binned, __global const int *binned_index,
                                   int nbinned, __constant const float *views, __global const float *tris, int ntris,
                                   int brute_cell, __global const int *lists_a, __global const int *lists_b,
-                                  float lx, float ly, float lz, int walk_coarse, int n, __global uchar *out)
+                                  float lx, float ly, float lz, float eps, int walk_coarse, int n, __global uchar *out)
 {
-    /* The lanes' receivers; lanes past the end repeat the last one and are not valid */
-    float sx[LANES], sy[LANES], sz[LANES], tmin[LANES];
+    /* The lanes' receivers; lanes past the end repeat the last one and are not valid. Lanes of one cell
+     * (most of them) share its coarse cell: found once. */
+    float sx[LANES], sy[LANES], sz[LANES];
     int fine[LANES], coarse[LANES], index[LANES], lane[LANES];
     for (int j = 0; j < LANES; ++j) {
         const int k = min(base + j, nbinned - 1);
-        const float4 s = binned[k];
-        sx[j] = s.x; sy[j] = s.y; sz[j] = s.z; tmin[j] = s.w;
-        fine[j] = receiver_cell(views, brute_cell, s.x, s.y, s.z, &coarse[j]);
+        const Start r = binned[k];
+        sx[j] = r.x; sy[j] = r.y; sz[j] = r.z;
+        fine[j] = r.cell;
+        coarse[j] = (j > 0 && fine[j] == fine[j - 1]) ? coarse[j - 1] : receiver_coarse(views, brute_cell, r.cell);
         index[j] = binned_index[k];
         lane[j] = base + j;
     }
     const lint valid = LANE_LOAD(int, lane) < nbinned;
-    const Packet p = packet(LANE_LOAD(float, sx), LANE_LOAD(float, sy), LANE_LOAD(float, sz), LANE_LOAD(float, tmin),
-                            lx, ly, lz);
+    const lfloat x = LANE_LOAD(float, sx), y = LANE_LOAD(float, sy), z = LANE_LOAD(float, sz);
+    const Packet p = packet(x, y, z, start_tmin(x, y, z, lx, ly, lz, eps), lx, ly, lz);
     lint hit = walk_cells(fine, valid, (lint)0, &p, tris, ntris, brute_cell, lists_a, lists_b);
     if (walk_coarse)
         hit = walk_cells(coarse, valid, hit, &p, tris, ntris, brute_cell, lists_a, lists_b);
@@ -302,16 +351,15 @@ NOINLINE void exact_classify_item(int base, __global const float4 *binned, __glo
 
 /* Pass 3's kernel: work-item g classifies the packet from binned receiver LANES g (its body is a NOINLINE
  * function: vecmath.h says why) */
-__kernel void exact_classify(__global const float4 *binned, __global const int *binned_index, int nbinned,
-                             __constant const float *views,
-                             __global const float *tris, int ntris,
-                             int brute_cell, __global const int *lists_a, __global const int *lists_b,
-                             float lx, float ly, float lz, int walk_coarse, int n, __global uchar *out)
+__kernel void exact_classify(__global const Start *binned, __global const int *binned_index, int nbinned,
+                             __constant const float *views, __global const float *tris, int ntris, int brute_cell,
+                             __global const int *lists_a, __global const int *lists_b, float lx, float ly, float lz,
+                             float eps, int walk_coarse, int n, __global uchar *out)
 {
     const int base = LANES * get_global_id(0);
     if (base < nbinned)
         exact_classify_item(base, binned, binned_index, nbinned, views, tris, ntris, brute_cell, lists_a, lists_b,
-                            lx, ly, lz, walk_coarse, n, out);
+                            lx, ly, lz, eps, walk_coarse, n, out);
 }
 
 #if LANES == 1
@@ -325,9 +373,9 @@ __kernel void exact_classify_points(BIN_ARGS, __global const float *tris, int nt
     const int i = get_global_id(0);
     if (i >= n)
         return;
-    float sx, sy, sz, tmin;
-    const int code = receiver_start(i, points, normals, cx, cy, cz, inv_scale, ox, oy, oz, lx, ly, lz, eps, with_normals,
-                                    &sx, &sy, &sz, &tmin);
+    float sx, sy, sz;
+    const int code = receivers_start(i, n, points, normals, cx, cy, cz, inv_scale, ox, oy, oz, lx, ly, lz, eps,
+                                     with_normals, &sx, &sy, &sz);
     if (code != WALK) {
         out[i] = (uchar)code;
         return;
@@ -336,7 +384,7 @@ __kernel void exact_classify_points(BIN_ARGS, __global const float *tris, int nt
     const int fine = receiver_cell(views, brute_cell, sx, sy, sz, &coarse);
     if (fine == brute_cell)
         atomic_inc(behind);
-    const Packet p = packet(sx, sy, sz, tmin, lx, ly, lz);
+    const Packet p = packet(sx, sy, sz, start_tmin(sx, sy, sz, lx, ly, lz, eps), lx, ly, lz);
     int hit = walk_list(fine, 1, 0, &p, tris, ntris, brute_cell, lists_a, lists_b);
     if (walk_coarse && coarse >= 0)
         hit = walk_list(coarse, 1, hit, &p, tris, ntris, brute_cell, lists_a, lists_b);

@@ -55,6 +55,8 @@
 #define VIEW_NY1(v) as_int((v)[25])
 #define LS_COARSE_SHIFT 4
 #define LS_COARSE (1 << LS_COARSE_SHIFT)
+/* The coarse cell of fine cell (i, j) of view v */
+#define LS_COARSE_OF(v, i, j) (VIEW_BASE1(v) + ((j) >> LS_COARSE_SHIFT) * VIEW_NX1(v) + ((i) >> LS_COARSE_SHIFT))
 
 /* The view of a point: for the cube, the face of the dominant axis of (point - light), faces ordered
  * +x, -x, +y, -y, +z, -z. */
@@ -85,8 +87,20 @@ INLINE int ls_point_cells(__constant const float *views, float px, float py, flo
     /* clamp in float first: any X/W, even inf or NaN, ends in a valid cell */
     const int i = (int)SC_MIN(SC_MAX(SC_FLOOR(X / W), 0.0f), (float)(nx - 1));
     const int j = (int)SC_MIN(SC_MAX(SC_FLOOR(Y / W), 0.0f), (float)(ny - 1));
-    *coarse = VIEW_BASE1(v) + (j >> LS_COARSE_SHIFT) * VIEW_NX1(v) + (i >> LS_COARSE_SHIFT);
+    *coarse = LS_COARSE_OF(v, i, j);
     return VIEW_BASE0(v) + j * nx + i;
+}
+
+/* The coarse cell of fine cell `cell` (numbered over all views, as ls_point_cells gives it): its view is
+ * the last whose fine cells start at or before it. */
+INLINE int ls_coarse_cell(__constant const float *views, int cell)
+{
+    int k = 0;
+    for (int m = 1; m < NVIEWS; ++m)
+        k = (cell >= VIEW_BASE0(views + VIEW_FLOATS * m)) ? m : k;
+    __constant const float *v = views + VIEW_FLOATS * k;
+    const int k_cell = cell - VIEW_BASE0(v), j = k_cell / VIEW_NX(v), i = k_cell - j * VIEW_NX(v);
+    return LS_COARSE_OF(v, i, j);
 }
 
 #endif

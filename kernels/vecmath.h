@@ -75,6 +75,11 @@
 #else
 #error "LANES must be 1, 4 or 8"
 #endif
+#if LANES == 1
+#define LANE_SQRT(x) SC_SQRT(x)
+#else
+#define LANE_SQRT(x) sqrt(x)      /* a library call, but one per LANES values */
+#endif
 #define LANE_TYPE(t) SC_CAT(t, SC_LANES_SUFFIX)
 typedef LANE_TYPE(float) lfloat;
 typedef LANE_TYPE(int) lint;

@@ -423,9 +423,9 @@ class ExactMethod(Method):
         counts = dev.scratch("exact: receiver cell counts", 4 * (brute_cell + 1))
         cl.enqueue_fill_buffer(queue, counts, np.int32(0), 0, 4 * (brute_cell + 1))
         slot = dev.scratch("exact: receiver slots", 4 * n)
-        start = dev.scratch("exact: receiver starts", 16 * n)          # float4 (s, tmin) per receiver
-        dev.kernel("exact.cl", "exact_bin_count", options)(queue, (n,), None, *bin_args, counts, slot, out_dev,
-                                                           start)
+        start = dev.scratch("exact: receiver starts", 16 * n)          # (s, cell) per receiver: kernels/exact.cl Start
+        dev.kernel("exact.cl", "exact_bin_count", options)(queue, (-(-n // BIN_LANES),), None, *bin_args, counts,
+                                                           slot, out_dev, start)
         offsets = dev.scratch("exact: receiver cell offsets", 4 * (brute_cell + 2))
         binned_count = self._builder.prefix_sum(self.grid, counts, brute_cell + 1, offsets)
         if binned_count:
@@ -433,15 +433,14 @@ class ExactMethod(Method):
             index = dev.scratch("exact: receiver indices by cell", 4 * binned_count)
             dropped = dev.scratch("exact: dropped receivers", 4)
             cl.enqueue_fill_buffer(queue, dropped, np.int32(0), 0, 4)
-            dev.kernel("exact.cl", "exact_bin_fill", options)(queue, (n,), None, np.int32(n), self.lists.params,
-                                                              np.int32(brute_cell), start, slot, offsets, by_cell, index,
-                                                              dropped)
+            dev.kernel("exact.cl", "exact_bin_fill", options)(queue, (n,), None, np.int32(n), start, slot, offsets,
+                                                              by_cell, index, dropped)
             check_filled(dev, dropped, "exact: the receivers' binning")
             packets = -(-binned_count // BIN_LANES)
             dev.kernel("exact.cl", "exact_classify", options)(
                 queue, (packets,), None, by_cell, index, np.int32(binned_count), self.lists.params, self._records,
-                np.int32(self._ntris), np.int32(brute_cell), lists_a, lists_b, *light, walk_coarse, np.int32(n),
-                out_dev)
+                np.int32(self._ntris), np.int32(brute_cell), lists_a, lists_b, *light, np.float32(self.eps), walk_coarse,
+                np.int32(n), out_dev)
         brute_start = np.empty(1, np.int32)
         cl.enqueue_copy(queue, brute_start, offsets, src_offset=4 * brute_cell)
         return dev.from_device(out_dev, n, np.uint8), binned_count - int(brute_start[0])
