@@ -188,19 +188,21 @@ __kernel void exact_bin_count(BIN_ARGS, __global int *counts, __global int *slot
     float x[LANES], y[LANES], z[LANES];
     int code[LANES];
     LANE_STORE(sx, x); LANE_STORE(sy, y); LANE_STORE(sz, z); LANE_STORE(codes, code);
+    /* The atomics last and back to back: each drains the stores before it, and interleaved with the
+     * starts' stores they cost twice as much (bunny bench: the pass 21 -> 15 ms) */
+    int cell[LANES];
     for (int j = 0; j < LANES && base + j < n; ++j) {
-        const int i = base + j;
-        int s = -1;
+        cell[j] = -1;
         if (code[j] == WALK) {
             int coarse;
-            const int cell = receiver_cell(views, brute_cell, x[j], y[j], z[j], &coarse);
-            const Start r = {x[j], y[j], z[j], cell};
-            start[i] = r;
-            s = atomic_inc(&counts[cell]);
+            cell[j] = receiver_cell(views, brute_cell, x[j], y[j], z[j], &coarse);
+            const Start r = {x[j], y[j], z[j], cell[j]};
+            start[base + j] = r;
         }
-        slot[i] = s;
-        out[i] = (uchar)code[j];
+        out[base + j] = (uchar)code[j];
     }
+    for (int j = 0; j < LANES && base + j < n; ++j)
+        slot[base + j] = (cell[j] >= 0) ? atomic_inc(&counts[cell[j]]) : -1;
 }
 
 /* Pass 2: every receiver with a slot copies its start to binned[k] and its index to index[k], k =
