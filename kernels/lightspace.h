@@ -16,7 +16,7 @@
  * (numbered from base1). Orthographic views have Mw = 0, cw = 1 (W = 1); perspective views have
  * e = the light and W = the distance along the view axis.
  *
- * Two levels: a primitive whose candidate cells span more than LS_COARSE fine cells (a ground
+ * Two levels: a primitive with more candidate cells than a coarse cell holds (LS_COARSE^2: a ground
  * plane, a wall) is listed in the coarse grid only, so it costs a few entries instead of thousands; a
  * receiver walks the list of its fine cell and the list of its coarse cell.
  *

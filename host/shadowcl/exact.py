@@ -267,7 +267,7 @@ class ExactMethod(Method):
     def _split_lists(self, grid, lists, vertices: np.ndarray, faces: np.ndarray):
         """CSR lists binned by pieces of the triangles in ``lists``' coarse cells, entries naming triangles.
 
-        A triangle whose projection spans more than LS_COARSE fine cells goes to the coarse grid, whose
+        A triangle whose projection covers more fine cells than a coarse cell holds goes to the coarse grid, whose
         cells are few and large: with walls and long pillars round a light inside a room, every
         receiver walks dozens of them. Each such triangle is cut in four (two bisections at the longest
         edge), the pieces binned on their own, and those still coarse cut again (SPLIT_ROUNDS at most;
