@@ -171,9 +171,11 @@ NOINLINE int ls_project(__global const float *prims, int p, __constant const flo
     /* Level: fine cells, or coarse cells for a primitive whose candidate cells outnumber a coarse cell's:
      * a coarse entry is walked by the receivers of LS_COARSE^2 fine cells, so a thin primitive (a
      * pillar's face: 2 x 40 cells) costs less in its own cells than in its coarse cells' lists. Measured
-     * against "more than LS_COARSE on either axis" (1.2 M receivers, walk ms, interleaved medians of 9,
-     * with / without normals): light_inside 43.2 -> 32.3 / 84.9 -> 71.8, default 13.8 -> 12.9 / 36.8 ->
-     * 33.9, bunny 41.3 -> 43.7 / 51.2 -> 49.7, ogre 43.9 -> 42.8 / 83.2 -> 80.8; the build within noise. */
+     * against "more than LS_COARSE on either axis" (LS_COARSE 16, 1.2 M receivers, walk ms, interleaved
+     * medians of 9, with / without normals): light_inside 43.2 -> 32.3 / 84.9 -> 71.8, default 13.8 ->
+     * 12.9 / 36.8 -> 33.9, bunny 41.3 -> 43.7 / 51.2 -> 49.7, ogre 43.9 -> 42.8 / 83.2 -> 80.8; the build
+     * within noise. LS_COARSE 8 (lightspace.h) keeps every fine primitive within a count record's mask
+     * (LS_MASK_CELLS: the fill replays it instead of projecting again). */
     P->shift = ((P->i1 - P->i0 + 1) * (P->j1 - P->j0 + 1) > LS_COARSE * LS_COARSE || P->all) ? LS_COARSE_SHIFT : 0;
     P->nx = P->shift ? VIEW_NX1(v) : nx;
     P->ny = P->shift ? VIEW_NY1(v) : ny;

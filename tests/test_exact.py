@@ -317,8 +317,9 @@ def on_surface(mesh, count, rng):
 
 def test_split_bounds_the_walk_of_a_light_inside_a_room(device, rng):
     """Large triangles in long coarse lists are binned by pieces (split=True): every receiver's walk
-    (its fine plus coarse list) is no longer than without the split, the mean walk falls by over 40%
-    (measured on this room: 24.5 -> 11.4 entries; on scenes/hard/light_inside.toml 52 -> 18), and the
+    (its fine plus coarse list) is no longer than without the split, the mean walk falls by over 25%
+    (measured on this room: 17.4 -> 11.5 entries; 24.5 -> 11.4 before the coarse level went by area
+    and to 8 x 8 fine cells, which keep the thin pillar faces out of the coarse lists unsplit), and the
     answers are the same bit for bit, since the walk still tests the original triangles."""
     mesh, light = room_with_pillars()
     points, normals = on_surface(mesh, 8000, rng)
@@ -332,14 +333,16 @@ def test_split_bounds_the_walk_of_a_light_inside_a_room(device, rng):
         assert (method.stats["split_triangles"] > 0) == split        # the room triggers the split
     assert 0.2 < masks[False].mean() < 0.8                             # outer faces, pillar shadows: 0.63
     assert np.all(walks[True] <= walks[False]), f"{int(np.sum(walks[True] > walks[False]))} walks grew"
-    assert walks[True].mean() <= 0.6 * walks[False].mean(), (walks[False].mean(), walks[True].mean())
+    assert walks[True].mean() <= 0.75 * walks[False].mean(), (walks[False].mean(), walks[True].mean())
     assert np.array_equal(masks[True], masks[False])
     check_against_reference(masks[True], mesh, light, points, normals, eps, "room")
 
 
-def test_split_opens_no_leak_through_shared_edges(device, rng):
-    """A coarse icosphere under a close light: its triangles go coarse, so they are binned by pieces,
-    and rays aimed through float32 points of shared edges and vertices must still all hit."""
+def test_split_opens_no_leak_through_shared_edges(device, rng, monkeypatch):
+    """A coarse icosphere under a close light: its triangles near the light go coarse, so they are
+    binned by pieces (the trigger at zero: there are too few of them for the default one), and rays
+    aimed through float32 points of shared edges and vertices must still all hit."""
+    monkeypatch.setattr(exact_module, "SPLIT_PER_COARSE_CELL", 0.0)
     mesh, position = icosphere(2), np.array([0.02, 1.3, 0.01])
     points = aimed_receivers(mesh, None, 16, rng, position)
     mask, method = classify(mesh, sc.PointLight(position), points, eps=1e-6, device=device, split=True)

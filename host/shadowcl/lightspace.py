@@ -73,7 +73,7 @@ from .lists import check_filled
 
 DELTA = 1.0 / 64.0          # cell enlargement in cells (kernels/lightspace.cl: LS_DELTA)
 VIEW_FLOATS = 32            # floats per view record (kernels/lightspace.h)
-COARSE = 16                 # fine cells per coarse cell side (kernels/lightspace.h: LS_COARSE)
+COARSE = 8                 # fine cells per coarse cell side (kernels/lightspace.h: LS_COARSE)
 BIG = 1.0e30                # "infinite" domain side (kernels/vecmath.h: SC_BIG)
 MAX_SIDE = 1 << 15          # cells per side of one view
 MAX_CELLS = 1 << 24         # cells picked automatically at most
