@@ -39,16 +39,19 @@ receivers on the ground + 200 k on the model, random order, PoCL on 2 cores; ran
   these scenes wrongly), so 'cells' is the default by the sum and the worst case. Lanes: 8 against 1
   on light_inside 95 / 169 ms with normals, 4 lanes 108; 16 crashes PoCL's LLVM 14 ("Do not know how
   to scalarize"), double8 arithmetic miscompiled there (ray_triangle.h's refinement is per lane).
-- Binning without recomputing (2026-12-02): pass 1 keeps each receiver's start (16 bytes, the caller's
-  order), pass 2 scatters only that start and the receiver's index (it found its cell again from the
-  start: a few flops against re-reading float64 points and normals), the walk reads them in order and
-  finds the cells once more. Against the previous fill (which redid the start from the points and
-  normals and scattered 32-byte records), own scene (six perturbed icospheres on a ground slab, 30.7 k
-  triangles, 1.2 M receivers, with normals), per-kernel medians of 7, old / new interleaved under a
-  load average of 11-13 (3 rounds): fill 448 / 172, 330 / 73, 126 / 40 ms; one-shot call 1114 / 852,
-  850 / 407, 365 / 270 ms. Without normals (the old fill re-read only the points) it is a wash: one-shot
-  606 / 597, 626 / 867, 791 / 796 ms (pass 1 pays for writing the starts). Tried and dropped: the walk gathering 32-byte records through the index
-  (no scatter pass): its gathers cost what the scatter saved (149-155 against 146 ms, quiet machine).
+- Binning without recomputing: pass 1 starts ``BIN_LANES`` receivers per work-item (the loads per
+  receiver, the normal, back-face and eps arithmetic over lanes), finds each one's cell and writes a
+  16-byte record of its start and cell in the caller's order; pass 2 scatters that record and the
+  receiver's index; the walk reads them in order and recomputes only tmin (a square root per packet)
+  and the coarse cell (once per distinct cell of the packet). Against re-finding the cell from the
+  start in passes 2 and 3 (bunny bench with normals, alternating processes, medians of 5, three
+  rounds): fill 13.0, 12.9, 12.8 -> 11.0, 7.0, 7.2 ms, one-shot 97.5, 92.6, 91.6 -> 100.4, 85.8, 84.5 ms.
+  The lanes' atomic_inc on their cells' counts come last, back to back: a locked operation drains
+  the stores before it, and interleaved with the records' stores the pass took 20.5-21.4 ms against
+  15.0-15.4. (Earlier, 2026-12-02: scattering the start instead of re-reading float64 points and
+  normals in pass 2 took the fill from 126-448 to 40-172 ms on a loaded machine; the walk gathering
+  records through the index instead of a scatter pass cost what the scatter saved.) Tried and
+  dropped: docs/exact-speed.md.
 - Watertight against dot5: the same speed within noise (the cull does most of the rejecting); dot5
   leaks on 6-8% of rays aimed at shared edges and vertices, watertight on none.
 - Slivers and long strips (aspect ratios to 1e-4): the float32 edge functions decide inside-ness
