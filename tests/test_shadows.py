@@ -9,6 +9,8 @@ import numpy as np
 import pytest
 
 import shadowcl as sc
+from shadowcl import points as points_module
+from shadowcl.points import check_points
 from conftest import SCENES, require_models
 
 TRIANGLE_METHODS = ("exact", "shadow_map", "angular", "shadow_volume")
@@ -248,7 +250,6 @@ def test_bad_input(device, call, error, match):
 
 
 def test_checked_points_pass_through():
-    from shadowcl.points import check_points
 
     points = check_points(np.zeros((4, 3), np.float32), np.ones((4, 3)))
     assert check_points(points) is points
@@ -263,7 +264,6 @@ def test_checked_points_pass_through():
 @pytest.mark.parametrize("count", [1, 2, 63, 64, 65, 127, 128, 129, 100_003])
 def test_receiver_bounds_at_every_size(rng, count):
     """The wide reduction of shadowcl.points gives the row-wise box at sizes straddling its row width."""
-    from shadowcl.points import check_points
 
     points = rng.normal(size=(count, 3)) * [1, 1e3, 1e-3]
     box = check_points(points).bounds
@@ -275,7 +275,6 @@ def test_receiver_bounds_at_every_size(rng, count):
 
 def test_an_empty_subset_with_normals_has_empty_unit_normals():
     """Points.unit_normals on an empty subset that has normals: (0, 3), not a TypeError (sqrt of None)."""
-    from shadowcl.points import check_points
     receivers = check_points(np.zeros((3, 3)), np.tile([0.0, 2.0, 0.0], (3, 1)))
     empty = receivers.subset(np.zeros(3, dtype=bool))
     assert empty.unit_normals().shape == (0, 3)
@@ -325,3 +324,14 @@ def test_exact_moves_receivers_on_the_device_as_the_host_does(device, rng, with_
     assert "positions" not in vars(lazy)          # the device moved them: the host never did
     host = method.classify(eager)
     assert 0.05 < fused.mean() < 0.95 and np.array_equal(fused, host)
+
+
+def test_bounds_of_many_points_are_reduced_in_parts_alike():
+    """From PARALLEL_BOUNDS points the box is reduced in parts on threads: the same box as NumPy's
+    axis-0 min and max, and a NaN or inf in the last part is still found, at its index."""
+    rng = np.random.default_rng(7)
+    points = rng.normal(size=(3 * points_module.PARALLEL_BOUNDS + 17, 3)) * [1.0, 1e3, 1e-3]
+    assert np.array_equal(check_points(points).bounds, np.array([points.min(axis=0), points.max(axis=0)]))
+    points[len(points) - 5, 2] = np.inf
+    with pytest.raises(ValueError, match=rf"points: contains NaN or inf \(first at index {len(points) - 5}\)"):
+        check_points(points)

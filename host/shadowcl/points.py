@@ -22,6 +22,9 @@ the host check of the normals ~7 ms more where it runs.
 
 from __future__ import annotations
 
+import functools
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -29,6 +32,8 @@ import numpy as np
 
 FLOAT32_MAX = float(np.finfo(np.float32).max)
 WIDE = 64             # points per row of _bounds' reductions
+PARALLEL_BOUNDS = 1 << 18   # points from which _bounds splits the work between threads
+BOUNDS_THREADS = max(1, min(os.cpu_count() or 1, 8))
 BOUNDS_SLACK = 1e-6   # relative to a box's diagonal: a point this close outside the box counts as inside
 
 
@@ -182,7 +187,22 @@ def _real_array(name: str, value) -> np.ndarray:
 def _bounds(positions: np.ndarray) -> np.ndarray:
     """(2, 3) float64 box (NaN and inf propagate into it). Reduced over rows of ``WIDE`` points at once:
     an axis-0 reduction over (N, 3) runs along short rows (~30 ms at 1.2 M points), over (N / 64, 192)
-    it vectorises (~3 ms, against ~5 ms column by column)."""
+    it vectorises (~3 ms, against ~5 ms column by column). Large arrays are reduced in parts on the
+    host's cores (NumPy's reductions release the GIL): 1.2 M points 5.9 -> 3.6 ms on 2 cores."""
+    if len(positions) >= PARALLEL_BOUNDS:
+        step = -(-len(positions) // BOUNDS_THREADS // WIDE) * WIDE
+        parts = list(_pool().map(_bounds_serial, [positions[k:k + step] for k in range(0, len(positions), step)]))
+        return np.array([np.min([p[0] for p in parts], axis=0), np.max([p[1] for p in parts], axis=0)])
+    return _bounds_serial(positions)
+
+
+@functools.cache
+def _pool() -> ThreadPoolExecutor:
+    """The threads of :func:`_bounds` (one per core, at most 8), made on first use."""
+    return ThreadPoolExecutor(max_workers=BOUNDS_THREADS, thread_name_prefix="shadowcl-bounds")
+
+
+def _bounds_serial(positions: np.ndarray) -> np.ndarray:
     if len(positions) == 0:
         return np.zeros((2, 3))
     whole = len(positions) // WIDE * WIDE
