@@ -90,12 +90,14 @@ def markdown(doc: dict, plot_name: str | None = None) -> str:
         *(f"- Case {note}" for note in doc["cases"]),
         *(f"- FAILED {f['scene']} light {f['light']} {f['label']}: {f['error']}" for f in doc["failed"]),
         "",
-        "| scene | light | normals | setting | one-shot ms | prepare ms | query ms | M recv/s | M recv/s (query) | host share "
-        "| false shadow | false light | error % | vs fastest peer | host MiB | device MiB |",
-        "|---|---|---|---|" + "---:|" * 12,
+        "| scene | light | normals | setting | one-shot ms | interleaved ms | prepare ms | query ms | M recv/s "
+        "| M recv/s (query) | host share | false shadow | false light | error % | vs fastest peer | host MiB | device MiB |",
+        "|---|---|---|---|" + "---:|" * 13,
     ]
     for r in doc["rows"]:
-        cells = [r["scene"], r["light"], "yes" if r.get("normals", True) else "no", r["label"], 1e3 * r["oneshot_s"], 1e3 * r["prepare_s"], 1e3 * r["query_s"],
+        interleaved = r.get("oneshot_interleaved_s")
+        cells = [r["scene"], r["light"], "yes" if r.get("normals", True) else "no", r["label"], 1e3 * r["oneshot_s"],
+                 None if interleaved is None else 1e3 * interleaved, 1e3 * r["prepare_s"], 1e3 * r["query_s"],
                  r["receivers_per_s"] / 1e6, r["receivers_per_s_query"] / 1e6, r["host_share"], r["false_shadow"],
                  r["false_light"], r["error_percent"], r["vs_peer"], r["host_peak_mib"], r["device_mib"]]
         lines.append("| " + " | ".join(_cell(c) for c in cells) + " |")

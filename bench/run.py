@@ -43,7 +43,7 @@ import report
 from peers import PEER, PEERS
 import shadowcl as sc
 from shadowcl.methods import default_eps, method_class, with_receiver_count
-from timing import Timing, clock, timed
+from timing import Timing, clock, interleaved, timed
 from shadowcl.metrics import mask_error
 
 # Method name -> {parameter: [values]}; every combination is one row. Peers (peers.PEERS) take part
@@ -344,14 +344,40 @@ def measure(case: Case, method: str, params: dict, truth: np.ndarray, repeats: i
     }
 
 
+def interleave_oneshots(case: Case, rows: list[dict], repeats: int, device, peers: dict = PEERS) -> None:
+    """Each of a case's ``rows`` timed again one-shot (a shadowcl method: ``sc.shadow_mask``; a peer: its
+    prepare + classify), in rounds that call every tool once (timing.interleaved), so that the load drift
+    of a shared machine hits them alike: ``oneshot_interleaved_s``, the time ``vs_peer`` compares."""
+    fns, instances = {}, []
+    try:
+        for row in rows:
+            name, params = row["method"], row["params"]
+            if name in peers:
+                instances.append(make_peer(name, params, peers))
+                fns[row["label"]] = lambda instance=instances[-1]: peer_run(instance, case, [])
+            else:
+                fns[row["label"]] = lambda name=name, params=params: one_shot(case, name, params, device)
+        timings = interleaved(fns, repeats)
+    finally:
+        for instance in instances:
+            close(instance)
+    for row in rows:
+        row["oneshot_interleaved_s"] = timings[row["label"]].median
+        row["oneshot_interleaved_runs_s"] = timings[row["label"]].runs
+
+
 def add_peer_ratios(rows: list[dict], peers: dict = PEERS) -> None:
     """``vs_peer``: each row's one-shot throughput over the fastest peer row's (prepare + classify) of its
-    case; ``fastest_peer`` names that row."""
+    case, from the interleaved one-shot times where a row has them (else the rows' own medians);
+    ``fastest_peer`` names that row."""
+    def speed(row):
+        return 1.0 / row.get("oneshot_interleaved_s", row["oneshot_s"])
+
     for _, group in itertools.groupby(rows, key=report.case_key):
         group = list(group)
-        fastest = max((r for r in group if r["method"] in peers), key=lambda r: r["receivers_per_s"], default=None)
+        fastest = max((r for r in group if r["method"] in peers), key=speed, default=None)
         for row in group:
-            row["vs_peer"] = row["receivers_per_s"] / fastest["receivers_per_s"] if fastest else None
+            row["vs_peer"] = speed(row) / speed(fastest) if fastest else None
             row["fastest_peer"] = fastest["label"] if fastest else None
 
 
@@ -416,15 +442,20 @@ def run_bench(scenes, sweep: dict, counts: dict, repeats: int = 5, seed: int = 0
                      f"normals: {describe_light(case.light)}; "
                      f"{len(case.points)} receivers, {len(case.scene.mesh.faces)} triangles, eps {case.eps:.3g}, "
                      f"{int(truth.sum())} in shadow; scene {case.scene.source}")
+        case_rows = []
         for name, params in jobs:
             bar.set_description(f"{case.scene.name} {label(name, params)}")
             try:
-                rows.append(measure(case, name, params, truth, repeats, device, peers))
+                case_rows.append(measure(case, name, params, truth, repeats, device, peers))
             except Exception as error:  # one failing setting (say, a resolution too large) must not end the run
                 failed.append({"scene": case.scene.name, "light": case.light_index, "label": label(name, params),
                                "error": f"{type(error).__name__}: {error}"})
                 bar.write(f"FAILED {case.scene.name} {label(name, params)}: {failed[-1]['error']}")
             bar.update()
+        if any(r["method"] in peers for r in case_rows):
+            bar.set_description(f"{case.scene.name} interleaved")
+            interleave_oneshots(case, case_rows, repeats, device, peers)
+        rows += case_rows
     bar.close()
     add_peer_ratios(rows, peers)
     return {
@@ -435,7 +466,9 @@ def run_bench(scenes, sweep: dict, counts: dict, repeats: int = 5, seed: int = 0
                      "timing": "public calls, median of repeats after a cold run (checked) and a warm-up: "
                                "one-shot sc.shadow_mask; sc.prepare (ends with the device queue drained) and "
                                ".mask timed apart; a peer's one-shot time is its prepare + classify; host share: "
-                               "one one-shot call under cProfile, wall minus the tottime of pyopencl's calls",
+                               "one one-shot call under cProfile, wall minus the tottime of pyopencl's calls; "
+                               "vs fastest peer: one-shot times again with every tool called once per round "
+                               "(interleaved), medians",
                      "load_average": {"start": load_start, "end": os.getloadavg()},
                      "peer": "embreex run(): tnear emulated by starting rays eps along their direction; "
                              "workers = processes"},

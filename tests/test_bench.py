@@ -133,11 +133,12 @@ def test_harness_rows_reports_and_compare(scene, device, tmp_path, monkeypatch):
     doc = run.run_bench([scene], sweep, COUNTS, repeats=2, device=device, progress=False)
     rows = doc["rows"]
     assert [r["label"] for r in rows] == ["all_lit label=a", "all_lit label=b", "embreex workers=1"]
-    # per setting, public calls only: shadow_mask cold, warm-up, 2 timed, 1 profiled; prepare warm-up, 2 timed
-    assert calls == {"shadow_mask": 2 * 5, "prepare": 2 * 3}
+    # per setting, public calls only: shadow_mask cold, warm-up, 2 timed, 1 profiled, then 1 warm-up and 2
+    # timed interleaved with the peer; prepare warm-up, 2 timed
+    assert calls == {"shadow_mask": 2 * 8, "prepare": 2 * 3}
     points, _ = rx.receivers(scene, **COUNTS)
     box = np.stack([points.min(axis=0), points.max(axis=0)])
-    assert len(AllLit.prepared_bounds) == 2 * 8
+    assert len(AllLit.prepared_bounds) == 2 * 11
     framed = frame_for(scene.mesh).points(box)      # methods work in the occluders' frame (shadowcl.frame)
     assert all(np.allclose(b, framed) for b in AllLit.prepared_bounds)
     for row in rows[:2]:
@@ -151,7 +152,9 @@ def test_harness_rows_reports_and_compare(scene, device, tmp_path, monkeypatch):
     assert peer["vs_peer"] == 1.0 and peer["wrong"] <= 2 and peer["host_share"] is None
     # the peer's one-shot time is its prepare + classify, run by run; vs_peer compares one-shot throughputs
     assert peer["oneshot_runs_s"] == pytest.approx([p + q for p, q in zip(peer["prepare_runs_s"], peer["query_runs_s"])])
-    assert rows[0]["vs_peer"] == pytest.approx(peer["oneshot_s"] / rows[0]["oneshot_s"])
+    # ... from the one-shot times taken again in interleaved rounds (repeats of them)
+    assert all(len(r["oneshot_interleaved_runs_s"]) == 2 and r["oneshot_interleaved_s"] > 0 for r in rows)
+    assert rows[0]["vs_peer"] == pytest.approx(peer["oneshot_interleaved_s"] / rows[0]["oneshot_interleaved_s"])
     assert all(r["oneshot_s"] > 0 and len(r["query_runs_s"]) == len(r["prepare_runs_s"]) == 2 for r in rows)
     doc = json.loads(json.dumps(doc, default=report.to_json))
     table = report.markdown(doc, plot_name="plot.png")
