@@ -8,14 +8,13 @@
  *
  * The passes: the count / scan / fill of the occluder lists (lightspace.cl) applied to the receivers,
  * then the walk in the irregular Z-buffer's traversal order (the receivers of a cell together):
- *   exact_bin_count  per receiver: check it, start it (s and its interval), write the start in the
- *                    caller's order, find its fine cell and take a slot there (atomic_inc on its count);
- *                    the code of a receiver needing no walk
+ *   exact_bin_count  per LANES receivers: check them, start them (s, over lanes), find each one's fine
+ *                    cell, write its Start (s and the cell) in the caller's order and take a slot in the
+ *                    cell (atomic_inc on its count); the code of a receiver needing no walk
  *   (host)           exclusive prefix sum of the counts (lightspace.ListBuilder.prefix_sum)
- *   exact_bin_fill   per receiver with a slot: its start and its index at its cell's offset + its slot
- *                    (the cell found again from the start, not from the points and normals)
- *   exact_classify   per packet of LANES consecutive binned receivers (cells found again from their
- *                    starts): the receivers of a cell share its list,
+ *   exact_bin_fill   per receiver with a slot: its Start and its index at its cell's offset + its slot
+ *   exact_classify   per packet of LANES consecutive binned receivers (tmin from s, the coarse cell
+ *                    from the fine one): the receivers of a cell share its list,
  *                    each triangle is loaded once and tested against all the packet's lanes still
  *                    unshadowed (plane cull and test over lanes: ray_triangle.h, vecmath.h), the walk
  *                    ends when they are all shadowed; each answer is written at its receiver's index.
