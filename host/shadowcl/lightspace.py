@@ -28,9 +28,9 @@ between views in proportion to their small primitives.
 
 **Cells, levels and the border.** Each view has ``nx`` x ``ny`` fine cells and a coarse grid of
 :data:`COARSE` x :data:`COARSE` fine cells per cell. A primitive with more candidate cells than a coarse
-cell holds (a ground quad, a wall) is listed in the coarse grid only: a few entries
-instead of thousands (the bench's ground quad: ~300 instead of ~600 k). A receiver walks its fine and
-its coarse cell's lists. The outermost rows and columns of cells extend to the edge of the view's
+cell holds (a ground quad, a wall) is listed in the coarse grid only: a few entries instead of thousands
+(the bench's ground quad, measured with 16 x 16 coarse cells: ~300 instead of ~600 k). A receiver walks
+its fine and its coarse cell's lists. The outermost rows and columns of cells extend to the edge of the view's
 *domain* (the whole plane for a single view, the face's square for a cube face): a primitive
 projecting beyond the window is listed in the border cells it reaches, and a point projecting outside
 the window (outside the prepared receiver bounds) falls into the nearest border cell, so
