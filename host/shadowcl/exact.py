@@ -368,7 +368,7 @@ class ExactMethod(Method):
         t0 = time.perf_counter()
         receivers = check_points(points, normals)
         if self._fp64 and isinstance(receivers, MovedPoints):
-            # the frame's move fused into the first pass (kernels/exact.cl receiver_start): no host pass
+            # the frame's move fused into the first pass (kernels/exact.cl receiver_point): no host pass
             points, move = receivers.world.positions, (*receivers.centre, 1.0 / receivers.scale)
         else:
             points, move = receivers.positions, (0.0, 0.0, 0.0, 1.0)
