@@ -368,10 +368,10 @@ def interleave_oneshots(case: Case, rows: list[dict], repeats: int, device, peer
 
 def add_peer_ratios(rows: list[dict], peers: dict = PEERS) -> None:
     """``vs_peer``: each row's one-shot throughput over the fastest peer row's (prepare + classify) of its
-    case, from the interleaved one-shot times where a row has them (else the rows' own medians);
+    case, from the interleaved one-shot times (run_bench takes them for every case with a peer);
     ``fastest_peer`` names that row."""
     def speed(row):
-        return 1.0 / row.get("oneshot_interleaved_s", row["oneshot_s"])
+        return 1.0 / row["oneshot_interleaved_s"]
 
     for _, group in itertools.groupby(rows, key=report.case_key):
         group = list(group)

@@ -90,6 +90,17 @@ INLINE int receiver_normal(int i, __global const input_t *normals, float *nx, fl
     return WALK;
 }
 
+/* The lanes' directions d from s towards the light: light - s (the whole segment) for a point light,
+ * the reverse of a directional light's travel */
+INLINE void to_light(lfloat sx, lfloat sy, lfloat sz, float lx, float ly, float lz, lfloat *dx, lfloat *dy, lfloat *dz)
+{
+#if LIGHT_POINT
+    *dx = lx - sx; *dy = ly - sy; *dz = lz - sz;
+#else
+    *dx = (lfloat)(-lx); *dy = (lfloat)(-ly); *dz = (lfloat)(-lz);
+#endif
+}
+
 /* The lanes' receivers base + j (lanes past n repeat receiver n - 1): their codes (WALK, or 1 for a
  * normal facing away from the light, 3, 4: see the top) and the starts s of those to walk, s = p + eps n
  * with n made unit (p without normals). The per-receiver loads are scalar; the arithmetic is over lanes. */
@@ -113,11 +124,8 @@ INLINE lint receivers_start(int base, int n, __global const input_t *points, __g
         lfloat nx = LANE_LOAD(float, mx), ny = LANE_LOAD(float, my), nz = LANE_LOAD(float, mz);
         const lfloat inv = 1.0f / LANE_SQRT(nx * nx + ny * ny + nz * nz);
         nx *= inv; ny *= inv; nz *= inv;
-#if LIGHT_POINT
-        const lfloat dx = lx - sx, dy = ly - sy, dz = lz - sz;
-#else
-        const lfloat dx = (lfloat)(-lx), dy = (lfloat)(-ly), dz = (lfloat)(-lz);
-#endif
+        lfloat dx, dy, dz;
+        to_light(sx, sy, sz, lx, ly, lz, &dx, &dy, &dz);
         codes = ((codes == WALK) & (nx * dx + ny * dy + nz * dz <= 0.0f)) ? (lint)1 : codes;
         sx += eps * nx; sy += eps * ny; sz += eps * nz;
     }
@@ -130,7 +138,8 @@ INLINE lint receivers_start(int base, int n, __global const input_t *points, __g
 INLINE lfloat start_tmin(lfloat sx, lfloat sy, lfloat sz, float lx, float ly, float lz, float eps)
 {
 #if LIGHT_POINT
-    const lfloat dx = lx - sx, dy = ly - sy, dz = lz - sz;
+    lfloat dx, dy, dz;
+    to_light(sx, sy, sz, lx, ly, lz, &dx, &dy, &dz);
     return eps / LANE_SQRT(dx * dx + dy * dy + dz * dz);
 #else
     return (lfloat)eps;
@@ -241,11 +250,7 @@ INLINE Packet packet(lfloat sx, lfloat sy, lfloat sz, lfloat tmin, float lx, flo
 {
     Packet p;
     p.sx = sx; p.sy = sy; p.sz = sz; p.tmin = tmin;
-#if LIGHT_POINT
-    p.dx = lx - sx; p.dy = ly - sy; p.dz = lz - sz;
-#else
-    p.dx = (lfloat)(-lx); p.dy = (lfloat)(-ly); p.dz = (lfloat)(-lz);
-#endif
+    to_light(sx, sy, sz, lx, ly, lz, &p.dx, &p.dy, &p.dz);
 #if !TEST_DOT5
     p.ray = wt_setup(p.sx, p.sy, p.sz, p.dx, p.dy, p.dz);
 #endif
