@@ -101,13 +101,13 @@ INLINE void to_light(lfloat sx, lfloat sy, lfloat sz, float lx, float ly, float 
 #endif
 }
 
-/* The lanes' receivers base + j (lanes past n repeat receiver n - 1): their codes (WALK, or 1 for a
- * normal facing away from the light, 3, 4: see the top) and the starts s of those to walk, s = p + eps n
- * with n made unit (p without normals). The per-receiver loads are scalar; the arithmetic is over lanes. */
-INLINE lint receivers_start(int base, int n, __global const input_t *points, __global const input_t *normals,
-                            input_t cx, input_t cy, input_t cz, input_t inv_scale, input_t ox, input_t oy, input_t oz,
-                            float lx, float ly, float lz, float eps, int with_normals, lfloat *psx, lfloat *psy,
-                            lfloat *psz)
+/* The lanes' receivers base + j (lanes past n repeat receiver n - 1), one lane at a time: their points
+ * (receiver_point) and, with normals, normals (receiver_normal; 1 where the point is not finite) in
+ * the lanes, and their codes (WALK, 3, 4). */
+INLINE lint receivers_load_lanes(int base, int n, __global const input_t *points, __global const input_t *normals,
+                                 input_t cx, input_t cy, input_t cz, input_t inv_scale, input_t ox, input_t oy,
+                                 input_t oz, int with_normals, lfloat *sx, lfloat *sy, lfloat *sz, lfloat *nx,
+                                 lfloat *ny, lfloat *nz)
 {
     float px[LANES], py[LANES], pz[LANES], mx[LANES], my[LANES], mz[LANES];
     int code[LANES];
@@ -118,10 +118,74 @@ INLINE lint receivers_start(int base, int n, __global const input_t *points, __g
         if (with_normals && code[j] == WALK)
             code[j] = receiver_normal(i, normals, &mx[j], &my[j], &mz[j]);
     }
-    lfloat sx = LANE_LOAD(float, px), sy = LANE_LOAD(float, py), sz = LANE_LOAD(float, pz);
-    lint codes = LANE_LOAD(int, code);
+    *sx = LANE_LOAD(float, px); *sy = LANE_LOAD(float, py); *sz = LANE_LOAD(float, pz);
+    *nx = LANE_LOAD(float, mx); *ny = LANE_LOAD(float, my); *nz = LANE_LOAD(float, mz);
+    return LANE_LOAD(int, code);
+}
+
+#if LANES == 8 && defined(__clang__)
+/* 4 and 8 input values in vectors; input4u at the input's own alignment, so that a row-major (N, 3)
+ * array can be read 4 values at a time from any row (a vector load; vload4 is a library call on PoCL) */
+typedef input_t input4u __attribute__((ext_vector_type(4), aligned(sizeof(input_t))));
+typedef input_t input8 __attribute__((ext_vector_type(8)));
+
+/* Rows r .. r + 7 of a row-major (N, 3) array, as columns: six loads of 4 values, then shuffles */
+INLINE void load_rows8(__global const input_t *array, int r, input8 *x, input8 *y, input8 *z)
+{
+    __global const input4u *v = (__global const input4u *)(array + 3 * r);
+    const input8 a = __builtin_shufflevector(v[0], v[1], 0, 1, 2, 3, 4, 5, 6, 7);   /* x0 y0 z0 x1 y1 z1 x2 y2 */
+    const input8 b = __builtin_shufflevector(v[2], v[3], 0, 1, 2, 3, 4, 5, 6, 7);   /* z2 x3 y3 z3 x4 y4 z4 x5 */
+    const input8 c = __builtin_shufflevector(v[4], v[5], 0, 1, 2, 3, 4, 5, 6, 7);   /* y5 z5 x6 y6 z6 x7 y7 z7 */
+    *x = __builtin_shufflevector(__builtin_shufflevector(a, b, 0, 3, 6, 9, 12, 15, -1, -1), c, 0, 1, 2, 3, 4, 5, 10, 13);
+    *y = __builtin_shufflevector(__builtin_shufflevector(a, b, 1, 4, 7, 10, 13, -1, -1, -1), c, 0, 1, 2, 3, 4, 8, 11, 14);
+    *z = __builtin_shufflevector(__builtin_shufflevector(a, b, 2, 5, 8, 11, 14, -1, -1, -1), c, 0, 1, 2, 3, 4, 9, 12, 15);
+}
+
+/* receivers_load_lanes for 8 receivers all below n, over lanes from the start (vector loads, the move
+ * and the rounding over lanes): the same bits. Returns 0 (and nothing is to be used) when a normal
+ * needs receiver_normal's rescaling or is bad, which receivers_load_lanes handles. */
+INLINE int receivers_load_rows(int base, __global const input_t *points, __global const input_t *normals,
+                               input_t cx, input_t cy, input_t cz, input_t inv_scale, input_t ox, input_t oy,
+                               input_t oz, int with_normals, lfloat *sx, lfloat *sy, lfloat *sz, lfloat *nx,
+                               lfloat *ny, lfloat *nz, lint *codes)
+{
+    input8 x, y, z;
+    load_rows8(points, base, &x, &y, &z);
+    *sx = __builtin_convertvector((x - cx) * inv_scale - ox, lfloat);
+    *sy = __builtin_convertvector((y - cy) * inv_scale - oy, lfloat);
+    *sz = __builtin_convertvector((z - cz) * inv_scale - oz, lfloat);
+    *codes = (SC_FINITE(*sx) & SC_FINITE(*sy) & SC_FINITE(*sz)) ? (lint)WALK : (lint)3;
+    *nx = *ny = *nz = (lfloat)1.0f;
     if (with_normals) {
-        lfloat nx = LANE_LOAD(float, mx), ny = LANE_LOAD(float, my), nz = LANE_LOAD(float, mz);
+        load_rows8(normals, base, &x, &y, &z);
+        *nx = __builtin_convertvector(x, lfloat); *ny = __builtin_convertvector(y, lfloat);
+        *nz = __builtin_convertvector(z, lfloat);
+        const lfloat len2 = *nx * *nx + *ny * *ny + *nz * *nz;
+        if (LANE_ANY(!((len2 > 1.0e-30f) & (len2 < 1.0e30f))))
+            return 0;
+    }
+    return 1;
+}
+#endif
+
+/* The lanes' receivers base + j (lanes past n repeat receiver n - 1): their codes (WALK, or 1 for a
+ * normal facing away from the light, 3, 4: see the top) and the starts s of those to walk, s = p + eps n
+ * with n made unit (p without normals). Whole packets of 8 load their rows as vectors; the rest, and a
+ * packet with a normal to rescale, one receiver at a time. The arithmetic is over lanes. */
+INLINE lint receivers_start(int base, int n, __global const input_t *points, __global const input_t *normals,
+                            input_t cx, input_t cy, input_t cz, input_t inv_scale, input_t ox, input_t oy, input_t oz,
+                            float lx, float ly, float lz, float eps, int with_normals, lfloat *psx, lfloat *psy,
+                            lfloat *psz)
+{
+    lfloat sx, sy, sz, nx, ny, nz;
+    lint codes;
+#if LANES == 8 && defined(__clang__)
+    if (!(base + LANES <= n && receivers_load_rows(base, points, normals, cx, cy, cz, inv_scale, ox, oy, oz,
+                                                   with_normals, &sx, &sy, &sz, &nx, &ny, &nz, &codes)))
+#endif
+        codes = receivers_load_lanes(base, n, points, normals, cx, cy, cz, inv_scale, ox, oy, oz, with_normals, &sx,
+                                     &sy, &sz, &nx, &ny, &nz);
+    if (with_normals) {
         const lfloat inv = 1.0f / LANE_SQRT(nx * nx + ny * ny + nz * nz);
         nx *= inv; ny *= inv; nz *= inv;
         lfloat dx, dy, dz;

@@ -459,6 +459,27 @@ def test_back_facing_normals_are_in_shadow_and_normals_need_not_be_unit(device, 
     assert not lit.any() and dark.all()
 
 
+@pytest.mark.parametrize("order", ["cells", "caller"])
+def test_normals_of_any_length_give_the_same_starts_in_every_packet(device, rng, order):
+    """Normals scaled by powers of two, some so far (2^+-60, 2^+-100) that their squared length leaves
+    float32 and the device rescales them in double first, mixed in the packets the count pass reads as
+    vectors and in its last, partial one (which, like a packet with a normal to rescale, it reads one
+    receiver at a time): the same mask, bit for bit, as the normals the device then works with (a
+    power-of-two scaling is exact, and a rescaled row is its normal over its largest component)."""
+    mesh = soup_mesh(rng, 200, 0.15)
+    points = rng.uniform(-1.5, 1.5, (4003, 3))
+    normals = rng.normal(size=points.shape)
+    light = sc.PointLight((0.3, 4.0, 0.2))
+    k = rng.choice([0, 0, 0, 0, 40, -40, 60, -60, 100, -100], len(points))
+    rescaled = np.abs(k) >= 60
+    assert 0 < rescaled.sum() < len(points) - 400
+    worked = np.where(rescaled[:, None], normals / np.abs(normals).max(axis=1, keepdims=True), normals)
+    expected, _ = classify(mesh, light, points, worked, device=device, order=order)
+    mask, _ = classify(mesh, light, points, normals * np.exp2(k)[:, None], device=device, order=order)
+    assert np.array_equal(mask, expected)
+    assert 0.05 < mask.mean() < 0.95
+
+
 def test_shadow_mask_api_and_stats(device, rng):
     mesh = soup_mesh(rng, 100, 0.15)
     points = rng.uniform(-1.5, 1.5, (3000, 3))
