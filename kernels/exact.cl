@@ -210,19 +210,19 @@ INLINE lfloat start_tmin(lfloat sx, lfloat sy, lfloat sz, float lx, float ly, fl
 #endif
 }
 
-/* The fine cell a started receiver is binned in (brute_cell when the view cannot place it), and in
- * *coarse its coarse cell (-1 for brute_cell) */
-INLINE int receiver_cell(__constant const float *views, int brute_cell, float sx, float sy, float sz, int *coarse)
+/* The fine cell the started receivers (lanes) are binned in (brute_cell where the view cannot place
+ * them), and in *coarse their coarse cell (-1 for brute_cell) */
+INLINE lint receiver_cell(__constant const float *views, int brute_cell, lfloat sx, lfloat sy, lfloat sz, lint *coarse)
 {
-    float w;
-    const int cell = ls_point_cells(views, sx, sy, sz, &w, coarse);
+    lfloat w;
+    const lint cell = ls_point_cells(views, sx, sy, sz, &w, coarse);
 #if PERSPECTIVE && NVIEWS == 1
-    if (!(w > 0.0f)) {
-        *coarse = -1;
-        return brute_cell;
-    }
-#endif
+    const lint placed = w > 0.0f;
+    *coarse = placed ? *coarse : (lint)-1;
+    return placed ? cell : (lint)brute_cell;
+#else
     return cell;
+#endif
 }
 
 /* The coarse cell of a receiver binned in fine cell `cell` (-1 for brute_cell), as receiver_cell gives */
@@ -257,17 +257,15 @@ __kernel void exact_bin_count(BIN_ARGS, __global int *counts, __global int *slot
     lfloat sx, sy, sz;
     const lint codes = receivers_start(base, n, points, normals, cx, cy, cz, inv_scale, ox, oy, oz, lx, ly, lz, eps,
                                        with_normals, &sx, &sy, &sz);
+    lint coarse;
+    const lint cells = (codes == WALK) ? receiver_cell(views, brute_cell, sx, sy, sz, &coarse) : (lint)-1;
     float x[LANES], y[LANES], z[LANES];
-    int code[LANES];
-    LANE_STORE(sx, x); LANE_STORE(sy, y); LANE_STORE(sz, z); LANE_STORE(codes, code);
+    int code[LANES], cell[LANES];
+    LANE_STORE(sx, x); LANE_STORE(sy, y); LANE_STORE(sz, z); LANE_STORE(codes, code); LANE_STORE(cells, cell);
     /* The atomics last and back to back: each drains the stores before it, and interleaved with the
      * starts' stores they cost twice as much (bunny bench: the pass 21 -> 15 ms) */
-    int cell[LANES];
     for (int j = 0; j < LANES && base + j < n; ++j) {
-        cell[j] = -1;
-        if (code[j] == WALK) {
-            int coarse;
-            cell[j] = receiver_cell(views, brute_cell, x[j], y[j], z[j], &coarse);
+        if (cell[j] >= 0) {
             const Start r = {x[j], y[j], z[j], cell[j]};
             start[base + j] = r;
         }

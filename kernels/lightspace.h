@@ -63,37 +63,71 @@
 /* The coarse cell of fine cell (i, j) of view v */
 #define LS_COARSE_OF(v, i, j) (VIEW_BASE1(v) + ((j) >> LS_COARSE_SHIFT) * VIEW_NX1(v) + ((i) >> LS_COARSE_SHIFT))
 
-/* The view of a point: for the cube, the face of the dominant axis of (point - light), faces ordered
- * +x, -x, +y, -y, +z, -z. */
-INLINE int ls_point_view(__constant const float *views, float px, float py, float pz)
+/* floor(q) clamped to [0, n - 1], for any q (inf and NaN included: NaN gives 0). Clamped first, then
+ * truncated: the same integer as floor then clamp (q >= 0 there), without a floor per lane. */
+INLINE lint ls_clamp_cell(lfloat q, lint n)
+{
+    const lfloat top = LANE_TO_FLOAT(n - 1);
+    const lfloat low = (q > 0.0f) ? q : (lfloat)0.0f;
+    return LANE_TO_INT((low < top) ? low : top);
+}
+
+/* The view of a point (or of the lanes' points: vecmath.h): for the cube, the face of the dominant axis
+ * of (point - light), faces ordered +x, -x, +y, -y, +z, -z. */
+INLINE lint ls_point_view(__constant const float *views, lfloat px, lfloat py, lfloat pz)
 {
 #if NVIEWS == 6
-    const float dx = px - views[0], dy = py - views[1], dz = pz - views[2];
-    const float ax = SC_ABS(dx), ay = SC_ABS(dy), az = SC_ABS(dz);
-    const int axis = (ax >= ay && ax >= az) ? 0 : ((ay >= az) ? 1 : 2);
-    const float da = (axis == 0) ? dx : ((axis == 1) ? dy : dz);
-    return 2 * axis + (da < 0.0f ? 1 : 0);
+    const lfloat dx = px - views[0], dy = py - views[1], dz = pz - views[2];
+    const lfloat ax = SC_LABS(dx), ay = SC_LABS(dy), az = SC_LABS(dz);
+    const lint x_axis = (ax >= ay) & (ax >= az), y_axis = !x_axis & (ay >= az);
+    const lint axis = x_axis ? (lint)0 : (y_axis ? (lint)1 : (lint)2);
+    const lfloat da = x_axis ? dx : (y_axis ? dy : dz);
+    return 2 * axis + ((da < 0.0f) ? (lint)1 : (lint)0);
 #else
-    return 0;
+    return (lint)0;
 #endif
 }
 
 /* A point's fine cell index (over all views) and, in *coarse, its coarse cell index; *w gets W (a
- * single perspective view cannot place a point with W <= 0: the caller must handle it). */
-INLINE int ls_point_cells(__constant const float *views, float px, float py, float pz, float *w, int *coarse)
+ * single perspective view cannot place a point with W <= 0: the caller must handle it). Written over
+ * lanes (vecmath.h). A cube's lanes take their face's parameters by a chain of selects, not by a load at
+ * an index per lane (PoCL's LLVM 14 scalarised a whole pass over such gathers: docs/exact-speed.md),
+ * and only those a face's rows need: a face looking along axis a (fit_views) has its X row non-zero at
+ * a and a + 1 only, its Y row at a and a + 2, its W row (+-1) at a, and no constant column, so
+ * X = Mx[a] d[a] + Mx[a+1] d[a+1] is the whole row's sum to the bit (its other terms are zeros). */
+INLINE lint ls_point_cells(__constant const float *views, lfloat px, lfloat py, lfloat pz, lfloat *w, lint *coarse)
 {
-    __constant const float *v = views + VIEW_FLOATS * ls_point_view(views, px, py, pz);
-    const float dx = px - v[0], dy = py - v[1], dz = pz - v[2];
-    const float X = v[4] * dx + v[5] * dy + v[6] * dz + v[7];
-    const float Y = v[8] * dx + v[9] * dy + v[10] * dz + v[11];
-    const float W = v[12] * dx + v[13] * dy + v[14] * dz + v[15];
-    const int nx = VIEW_NX(v), ny = VIEW_NY(v);
+    const lfloat dx = px - views[0], dy = py - views[1], dz = pz - views[2];    /* the eye: one for all views */
+    lint nx = (lint)VIEW_NX(views), ny = (lint)VIEW_NY(views), base0 = (lint)VIEW_BASE0(views);
+    lint base1 = (lint)VIEW_BASE1(views), nx1 = (lint)VIEW_NX1(views);
+#if NVIEWS == 6
+    const lint view = ls_point_view(views, px, py, pz), axis = view >> 1;
+    const lfloat da = (axis == 0) ? dx : ((axis == 1) ? dy : dz);
+    const lfloat du = (axis == 0) ? dy : ((axis == 1) ? dz : dx);
+    const lfloat dv = (axis == 0) ? dz : ((axis == 1) ? dx : dy);
+    lfloat xa = (lfloat)views[4], xu = (lfloat)views[5], ya = (lfloat)views[8], yv = (lfloat)views[10];
+    lfloat wa = (lfloat)views[12];
+    for (int v = 1; v < 6; ++v) {
+        __constant const float *p = views + VIEW_FLOATS * v;
+        const int a = v >> 1;
+        const lint here = view == v;
+        xa = here ? (lfloat)p[4 + a] : xa; xu = here ? (lfloat)p[4 + (a + 1) % 3] : xu;
+        ya = here ? (lfloat)p[8 + a] : ya; yv = here ? (lfloat)p[8 + (a + 2) % 3] : yv;
+        wa = here ? (lfloat)p[12 + a] : wa;
+        nx = here ? (lint)VIEW_NX(p) : nx; ny = here ? (lint)VIEW_NY(p) : ny;
+        base0 = here ? (lint)VIEW_BASE0(p) : base0; base1 = here ? (lint)VIEW_BASE1(p) : base1;
+        nx1 = here ? (lint)VIEW_NX1(p) : nx1;
+    }
+    const lfloat X = xa * da + xu * du, Y = ya * da + yv * dv, W = wa * da;
+#else
+    const lfloat X = views[4] * dx + views[5] * dy + views[6] * dz + views[7];
+    const lfloat Y = views[8] * dx + views[9] * dy + views[10] * dz + views[11];
+    const lfloat W = views[12] * dx + views[13] * dy + views[14] * dz + views[15];
+#endif
     *w = W;
-    /* clamp in float first: any X/W, even inf or NaN, ends in a valid cell */
-    const int i = (int)SC_MIN(SC_MAX(SC_FLOOR(X / W), 0.0f), (float)(nx - 1));
-    const int j = (int)SC_MIN(SC_MAX(SC_FLOOR(Y / W), 0.0f), (float)(ny - 1));
-    *coarse = LS_COARSE_OF(v, i, j);
-    return VIEW_BASE0(v) + j * nx + i;
+    const lint i = ls_clamp_cell(X / W, nx), j = ls_clamp_cell(Y / W, ny);
+    *coarse = base1 + (j >> LS_COARSE_SHIFT) * nx1 + (i >> LS_COARSE_SHIFT);
+    return base0 + j * nx + i;
 }
 
 /* The coarse cell of fine cell `cell` (numbered over all views, as ls_point_cells gives it): its view is

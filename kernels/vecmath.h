@@ -81,6 +81,18 @@
 #define LANE_SQRT(x) sqrt(x)      /* a library call, but one per LANES values */
 #endif
 #define LANE_TYPE(t) SC_CAT(t, SC_LANES_SUFFIX)
+/* Lane conversions int <-> float (C's rounding towards zero for float -> int), as single instructions:
+ * OpenCL's convert_intN / convert_floatN are library calls on PoCL */
+#if LANES == 1
+#define LANE_TO_INT(x) ((int)(x))
+#define LANE_TO_FLOAT(x) ((float)(x))
+#elif defined(__clang__)
+#define LANE_TO_INT(x) __builtin_convertvector((x), lint)
+#define LANE_TO_FLOAT(x) __builtin_convertvector((x), lfloat)
+#else
+#define LANE_TO_INT(x) SC_CAT(convert_int, SC_LANES_SUFFIX)(x)
+#define LANE_TO_FLOAT(x) SC_CAT(convert_float, SC_LANES_SUFFIX)(x)
+#endif
 typedef LANE_TYPE(float) lfloat;
 typedef LANE_TYPE(int) lint;
 #if defined(__clang__)

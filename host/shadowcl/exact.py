@@ -44,7 +44,9 @@ receivers on the ground + 200 k on the model, random order, PoCL on 2 cores; ran
   against loading and moving them one receiver at a time, interleaved in one process, medians of 11,
   the pass in ms with / without normals: default 20.2 -> 14.6 / 22.0 -> 17.4, bunny 14.4 -> 10.0 /
   13.4 -> 9.8, ogre 24.4 -> 17.6 / 21.1 -> 12.5, light_inside 19.0 -> 13.7 / 19.9 -> 15.4, the same
-  masks), finds each one's cell and writes a
+  masks), finds their cells over lanes too (kernels/lightspace.h ls_point_cells: then, the same way,
+  default 15.6 -> 11.8 / 15.0 -> 9.9, light_inside 16.0 -> 12.1 / 12.9 -> 7.7, bunny 13.5 -> 9.9 / 10.1
+  -> 7.6, ogre 13.1 -> 9.9 / 10.5 -> 7.7) and writes a
   16-byte record of its start and cell in the caller's order; pass 2 scatters that record and the
   receiver's index; the walk reads them in order and recomputes only tmin (a square root per packet)
   and the coarse cell (once per distinct cell of the packet). Against re-finding the cell from the
