@@ -238,6 +238,26 @@ typedef struct {
     int cell;
 } Start;
 
+#if LANES == 8 && defined(__clang__)
+/* The Starts of 8 consecutive receivers (lanes) and their codes, written as four 32-byte and one 8-byte
+ * vector stores (the records transposed from the lanes by shuffles). start must be 32-byte aligned. */
+INLINE void store_starts8(__global Start *start, __global uchar *out, lfloat x, lfloat y, lfloat z, lint cell,
+                          lint code)
+{
+    const lfloat c = as_float8(cell);
+    const lfloat xy_lo = __builtin_shufflevector(x, y, 0, 8, 1, 9, 2, 10, 3, 11);      /* x0 y0 x1 y1 x2 y2 x3 y3 */
+    const lfloat xy_hi = __builtin_shufflevector(x, y, 4, 12, 5, 13, 6, 14, 7, 15);
+    const lfloat zc_lo = __builtin_shufflevector(z, c, 0, 8, 1, 9, 2, 10, 3, 11);
+    const lfloat zc_hi = __builtin_shufflevector(z, c, 4, 12, 5, 13, 6, 14, 7, 15);
+    __global float8 *r = (__global float8 *)start;
+    r[0] = __builtin_shufflevector(xy_lo, zc_lo, 0, 1, 8, 9, 2, 3, 10, 11);            /* x0 y0 z0 c0 x1 y1 z1 c1 */
+    r[1] = __builtin_shufflevector(xy_lo, zc_lo, 4, 5, 12, 13, 6, 7, 14, 15);
+    r[2] = __builtin_shufflevector(xy_hi, zc_hi, 0, 1, 8, 9, 2, 3, 10, 11);
+    r[3] = __builtin_shufflevector(xy_hi, zc_hi, 4, 5, 12, 13, 6, 7, 14, 15);
+    *(__global uchar8 *)out = __builtin_convertvector(code, uchar8);
+}
+#endif
+
 #define BIN_ARGS                                                                                     \
     __global const input_t *points, __global const input_t *normals, int n, input_t cx, input_t cy,  \
         input_t cz, input_t inv_scale, input_t ox, input_t oy, input_t oz, __constant const float *views, \
@@ -246,8 +266,9 @@ typedef struct {
 /* Pass 1, LANES receivers per work-item. Contract: points (n x 3, float32 relative to the local origin,
  * or float64 with INPUT_F64, the frame's move in (cx, cy, cz, inv_scale) and the origin in (ox, oy,
  * oz)), normals likewise if with_normals (any non-zero length); views: the grid the lists were built on;
- * counts: brute_cell + 1 ints, zeroed. Writes out[i] (the code of a receiver needing no walk, else 0)
- * and slot[i] (its rank in its cell, -1 when it needs no walk); for a receiver with a slot, start[i]. */
+ * counts: brute_cell + 1 ints, zeroed; start: 32-byte aligned. Writes out[i] (the code of a receiver
+ * needing no walk, else 0), start[i] (its start and cell, -1 when it needs no walk) and slot[i] (its
+ * rank in its cell, -1 when it needs no walk). */
 __kernel void exact_bin_count(BIN_ARGS, __global int *counts, __global int *slot, __global uchar *out,
                               __global Start *start)
 {
@@ -259,18 +280,25 @@ __kernel void exact_bin_count(BIN_ARGS, __global int *counts, __global int *slot
                                        with_normals, &sx, &sy, &sz);
     lint coarse;
     const lint cells = (codes == WALK) ? receiver_cell(views, brute_cell, sx, sy, sz, &coarse) : (lint)-1;
-    float x[LANES], y[LANES], z[LANES];
-    int code[LANES], cell[LANES];
-    LANE_STORE(sx, x); LANE_STORE(sy, y); LANE_STORE(sz, z); LANE_STORE(codes, code); LANE_STORE(cells, cell);
-    /* The atomics last and back to back: each drains the stores before it, and interleaved with the
-     * starts' stores they cost twice as much (bunny bench: the pass 21 -> 15 ms) */
-    for (int j = 0; j < LANES && base + j < n; ++j) {
-        if (cell[j] >= 0) {
+    int cell[LANES];
+    LANE_STORE(cells, cell);
+#if LANES == 8 && defined(__clang__)
+    if (base + LANES <= n)
+        store_starts8(start + base, out + base, sx, sy, sz, cells, codes);
+    else
+#endif
+    {
+        float x[LANES], y[LANES], z[LANES];
+        int code[LANES];
+        LANE_STORE(sx, x); LANE_STORE(sy, y); LANE_STORE(sz, z); LANE_STORE(codes, code);
+        for (int j = 0; j < LANES && base + j < n; ++j) {
             const Start r = {x[j], y[j], z[j], cell[j]};
             start[base + j] = r;
+            out[base + j] = (uchar)code[j];
         }
-        out[base + j] = (uchar)code[j];
     }
+    /* The atomics last and back to back: each drains the stores before it, and interleaved with the
+     * starts' stores they cost twice as much (bunny bench: the pass 21 -> 15 ms) */
     for (int j = 0; j < LANES && base + j < n; ++j)
         slot[base + j] = (cell[j] >= 0) ? atomic_inc(&counts[cell[j]]) : -1;
 }
