@@ -112,7 +112,7 @@ INLINE lint receivers_load_lanes(int base, int n, __global const input_t *points
     float px[LANES], py[LANES], pz[LANES], mx[LANES], my[LANES], mz[LANES];
     int code[LANES];
     for (int j = 0; j < LANES; ++j) {
-        const int i = min(base + j, n - 1);
+        const int i = SC_IMIN(base + j, n - 1);
         code[j] = receiver_point(i, points, cx, cy, cz, inv_scale, ox, oy, oz, &px[j], &py[j], &pz[j]);
         mx[j] = my[j] = mz[j] = 1.0f;
         if (with_normals && code[j] == WALK)
@@ -255,6 +255,24 @@ INLINE void store_starts8(__global Start *start, __global uchar *out, lfloat x, 
     r[2] = __builtin_shufflevector(xy_hi, zc_hi, 0, 1, 8, 9, 2, 3, 10, 11);
     r[3] = __builtin_shufflevector(xy_hi, zc_hi, 4, 5, 12, 13, 6, 7, 14, 15);
     *(__global uchar8 *)out = __builtin_convertvector(code, uchar8);
+}
+#endif
+
+#if LANES == 8 && defined(__clang__)
+/* 8 consecutive Start records (32-byte aligned) as lanes: four 32-byte loads, transposed by shuffles
+ * (store_starts8's inverse) */
+INLINE void load_starts8(__global const Start *start, lfloat *x, lfloat *y, lfloat *z, lint *cell)
+{
+    __global const float8 *r = (__global const float8 *)start;
+    const lfloat r0 = r[0], r1 = r[1], r2 = r[2], r3 = r[3];      /* r0: x0 y0 z0 c0 x1 y1 z1 c1 */
+    const lfloat lo = __builtin_shufflevector(r0, r1, 0, 4, 8, 12, 1, 5, 9, 13);   /* x0 x1 x2 x3 y0 y1 y2 y3 */
+    const lfloat hi = __builtin_shufflevector(r2, r3, 0, 4, 8, 12, 1, 5, 9, 13);   /* x4 .. x7 y4 .. y7 */
+    const lfloat lo2 = __builtin_shufflevector(r0, r1, 2, 6, 10, 14, 3, 7, 11, 15);  /* z0 .. z3 c0 .. c3 */
+    const lfloat hi2 = __builtin_shufflevector(r2, r3, 2, 6, 10, 14, 3, 7, 11, 15);
+    *x = __builtin_shufflevector(lo, hi, 0, 1, 2, 3, 8, 9, 10, 11);
+    *y = __builtin_shufflevector(lo, hi, 4, 5, 6, 7, 12, 13, 14, 15);
+    *z = __builtin_shufflevector(lo2, hi2, 0, 1, 2, 3, 8, 9, 10, 11);
+    *cell = as_int8(__builtin_shufflevector(lo2, hi2, 4, 5, 6, 7, 12, 13, 14, 15));
 }
 #endif
 
@@ -421,19 +439,32 @@ NOINLINE void exact_classify_item(int base, __global const Start *binned, __glob
 {
     /* The lanes' receivers; lanes past the end repeat the last one and are not valid. Lanes of one cell
      * (most of them) share its coarse cell: found once. */
-    float sx[LANES], sy[LANES], sz[LANES];
+    lfloat x, y, z;
+    lint cells;
     int fine[LANES], coarse[LANES], index[LANES], lane[LANES];
+#if LANES == 8 && defined(__clang__)
+    if (base + LANES <= nbinned) {
+        load_starts8(binned + base, &x, &y, &z, &cells);
+        LANE_STORE(cells, fine);
+        LANE_STORE(*(__global const lint *)(binned_index + base), index);
+    } else
+#endif
+    {
+        float sx[LANES], sy[LANES], sz[LANES];
+        for (int j = 0; j < LANES; ++j) {
+            const int k = SC_IMIN(base + j, nbinned - 1);
+            const Start r = binned[k];
+            sx[j] = r.x; sy[j] = r.y; sz[j] = r.z;
+            fine[j] = r.cell;
+            index[j] = binned_index[k];
+        }
+        x = LANE_LOAD(float, sx); y = LANE_LOAD(float, sy); z = LANE_LOAD(float, sz);
+    }
     for (int j = 0; j < LANES; ++j) {
-        const int k = min(base + j, nbinned - 1);
-        const Start r = binned[k];
-        sx[j] = r.x; sy[j] = r.y; sz[j] = r.z;
-        fine[j] = r.cell;
-        coarse[j] = (j > 0 && fine[j] == fine[j - 1]) ? coarse[j - 1] : receiver_coarse(views, brute_cell, r.cell);
-        index[j] = binned_index[k];
+        coarse[j] = (j > 0 && fine[j] == fine[j - 1]) ? coarse[j - 1] : receiver_coarse(views, brute_cell, fine[j]);
         lane[j] = base + j;
     }
     const lint valid = LANE_LOAD(int, lane) < nbinned;
-    const lfloat x = LANE_LOAD(float, sx), y = LANE_LOAD(float, sy), z = LANE_LOAD(float, sz);
     const Packet p = packet(x, y, z, start_tmin(x, y, z, lx, ly, lz, eps), lx, ly, lz);
     lint hit = walk_cells(fine, valid, (lint)0, &p, tris, ntris, brute_cell, lists_a, lists_b);
     if (walk_coarse)

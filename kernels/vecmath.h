@@ -32,6 +32,7 @@
 #define SC_FLOOR(x) __builtin_floorf(x)
 #define SC_SQRT(x) __builtin_sqrtf(x)
 #define SC_CTZ(x) __builtin_ctz(x)
+#define SC_IMIN(a, b) ((a) < (b) ? (a) : (b))   /* min(int, int) is a library call too */
 #else
 #define SC_ABS(x) fabs(x)
 #define SC_MIN(a, b) fmin((a), (b))
@@ -39,6 +40,7 @@
 #define SC_FLOOR(x) floor(x)
 #define SC_SQRT(x) sqrt(x)
 #define SC_CTZ(x) (31 - clz((x) & (0u - (x))))
+#define SC_IMIN(a, b) min((a), (b))
 #endif
 
 /* Lanes: kernels that test one triangle against several receivers at once are written once over the
