@@ -33,9 +33,10 @@
 #define SC_SQRT(x) __builtin_sqrtf(x)
 #define SC_CTZ(x) __builtin_ctz(x)
 #define SC_IMIN(a, b) ((a) < (b) ? (a) : (b))   /* min(int, int) is a library call too */
-/* A hint to bring the cache line at global pointer p in (OpenCL's prefetch is a library call; PoCL's CPU
- * devices have one flat address space, so the pointer goes through an integer to the builtin) */
-#define SC_PREFETCH(p) __builtin_prefetch((const void *)(ulong)(p))
+/* A hint to bring the cache line at global pointer p in, to be read (write 0) or written (write 1).
+ * OpenCL's prefetch is a library call; PoCL's CPU devices have one flat address space, so the pointer
+ * goes through an integer to clang's builtin. */
+#define SC_PREFETCH(p, write) __builtin_prefetch((const void *)(ulong)(p), (write))
 #else
 #define SC_ABS(x) fabs(x)
 #define SC_MIN(a, b) fmin((a), (b))
@@ -44,7 +45,7 @@
 #define SC_SQRT(x) sqrt(x)
 #define SC_CTZ(x) (31 - clz((x) & (0u - (x))))
 #define SC_IMIN(a, b) min((a), (b))
-#define SC_PREFETCH(p) prefetch((p), 1)
+#define SC_PREFETCH(p, write) prefetch((p), 1)
 #endif
 
 /* Lanes: kernels that test one triangle against several receivers at once are written once over the
