@@ -480,6 +480,31 @@ def test_normals_of_any_length_give_the_same_starts_in_every_packet(device, rng,
     assert 0.05 < mask.mean() < 0.95
 
 
+@pytest.mark.parametrize("order", ["cells", "caller"])
+@pytest.mark.parametrize("views", ["cube", "perspective"])
+def test_receivers_at_the_light_are_answered_by_the_method(device, rng, order, views):
+    """A receiver whose tested segment is at most eps long is lit, unless its normal faces away (DESIGN.md),
+    and the exact method answers it itself (answers_at_the_light: Shadows skips its host pass): at the
+    light, where a cube face's or a single view's projection is 0 / 0 or behind the eye, and within eps."""
+    assert ExactMethod.answers_at_the_light
+    mesh = soup_mesh(rng, 200, 0.15)
+    eps = default_eps(mesh.bounds)
+    light = sc.PointLight((0.2, 2.5, -0.1))
+    offsets = rng.normal(size=(60, 3))
+    offsets *= rng.uniform(0.0, 0.45 * eps, (60, 1)) / np.linalg.norm(offsets, axis=1, keepdims=True)
+    points = np.concatenate([np.repeat([light.position], 4, axis=0), light.position + offsets])
+    at = np.arange(len(points)) < 4
+    toward = np.where(at[:, None], [0.3, -1.0, 0.2], light.position - points)   # a start eps along it stays within eps
+    bounds = np.stack([points.min(0), points.max(0)]) if views == "cube" else np.array([[-1.0, -1.0, -1.0], [1.0, 0.0, 1.0]])
+    # at the light itself n . (light - p) = 0: facing away by the rule, so in shadow with any normal
+    for normals, expected in ((None, np.zeros(len(points), bool)), (toward, at), (-toward, np.ones(len(points), bool))):
+        mask, method = classify(mesh, light, points, normals, eps=eps, device=device, receiver_bounds=bounds, order=order)
+        assert method.stats["view_kind"] == views
+        assert np.array_equal(mask, expected), normals is None
+    public = sc.shadow_mask(mesh, light, points, toward, method="exact", device=device, eps=eps)
+    assert np.array_equal(public, at)
+
+
 def test_shadow_mask_api_and_stats(device, rng):
     mesh = soup_mesh(rng, 100, 0.15)
     points = rng.uniform(-1.5, 1.5, (3000, 3))

@@ -37,6 +37,9 @@ Optional capabilities are declared on the class, never found by ``hasattr``:
 - ``eps_meaning``: how the method honours ``eps``, or None when it cannot (its own resolution sets the
   offset): the public calls then refuse an ``eps`` other than None (:func:`resolve_eps`), and
   :func:`methods` lists it as the method's ``eps`` entry.
+- ``answers_at_the_light``: the method itself answers a receiver whose tested segment is at most ``eps``
+  long (lit, unless its normal faces away), whatever its projection makes of a point at its eye; else
+  :class:`shadowcl.Shadows` finds such receivers on the host and sets them.
 """
 
 from __future__ import annotations
@@ -77,6 +80,7 @@ class Method(abc.ABC):
     point_light_reach = 2.0 ** 24     # shadowcl.frame.DIRECTIONAL_DISTANCE: float32's own limit
     min_light_clearance = 0.0
     eps_meaning: str | None = "as DESIGN.md: the segment starts eps along the normal and ignores hits within eps"
+    answers_at_the_light = False
 
     def __init__(self, device, **params):
         self.check_parameter_names(params)

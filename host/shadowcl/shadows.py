@@ -132,7 +132,8 @@ class Shadows:
                 answer[outside[reaching]] = getattr(self._fitted_to(candidates, far), kind)(candidates)
         else:
             answer = getattr(self._instance, kind)(receivers)
-        answer[self._at_the_light(receivers)] = True if kind == "visibility" else False
+        if not self._instance.answers_at_the_light:
+            answer[self._at_the_light(receivers)] = True if kind == "visibility" else False
         self._check_s, self._classify_s = checked - start, time.perf_counter() - start
         self._outside, self._receivers = len(outside), len(receivers)
         return answer
