@@ -391,11 +391,11 @@ class ExactMethod(Method):
             hi = min(n, lo + self.chunk)
             out[lo:hi], behind = self._run(points[lo:hi], None if normals is None else normals[lo:hi], move)
             brute += behind
-        bad = np.flatnonzero(out == 3)
-        if len(bad):   # finite, but beyond float32 once moved into the local frame
-            raise ValueError(f"points: overflow float32 relative to the occluders (first at index {int(bad[0])})")
-        if np.any(out == 4):
-            receivers.checked_normals()          # raises the check's own error for the bad row
+        if n and out.max() > 1:     # one pass over the codes; the search only when one is bad
+            bad = np.flatnonzero(out == 3)
+            if len(bad):   # finite, but beyond float32 once moved into the local frame
+                raise ValueError(f"points: overflow float32 relative to the occluders (first at index {int(bad[0])})")
+            receivers.checked_normals()          # raises the check's own error for the bad row (code 4)
             raise RuntimeError("exact: the device refused normals the host check accepts (a bug)")
         self.stats.update(classify_s=time.perf_counter() - t0, receivers=n, brute_fallback=brute)
         return out.view(bool)
