@@ -536,6 +536,18 @@ def prepared(device):
     return method
 
 
+def far_prepared(device):
+    """Occluders 3e38 from the origin, and receivers around them with one (index 20, inside a whole
+    packet of the count pass) at +3e38: finite, but 6e38 from the occluders, beyond float32."""
+    rng = np.random.default_rng(5)
+    mesh = sc.Mesh(rng.normal(size=(30, 3)) + [-3e38, 0, 0], np.arange(30).reshape(-1, 3))
+    points = rng.normal(size=(41, 3)) + [-3e38, 0, 0]
+    points[20] = [3e38, 0, 0]
+    method = ExactMethod(device)
+    method.prepare(mesh, sc.DirectionalLight((0, -1, 0)), np.stack([points.min(0), points.max(0)]), 1e-3)
+    return method, points
+
+
 BAD_INPUTS = [
     (lambda d: ExactMethod(d).classify(np.zeros((2, 3))), RuntimeError, r"classify: call prepare"),
     (lambda d: ExactMethod(d, test="fast"), ValueError, r"test: expected one of"),
@@ -557,6 +569,8 @@ BAD_INPUTS = [
     (lambda d: prepared(d).classify(np.zeros((2, 3)), np.zeros((2, 3))), ValueError, r"normals: zero-length normal at index 0"),
     (lambda d: prepared(d).classify(np.zeros((2, 3)), [[0, 1, 0], [np.nan, 1, 0]]), ValueError, r"normals: contains NaN or inf \(first at index 1\)"),
     (lambda d: prepared(d).classify(np.zeros((2, 3)), np.ones((3, 3))), ValueError, r"normals: expected shape \(2, 3\)"),
+    (lambda d: (lambda m, p: m.classify(p))(*far_prepared(d)), ValueError,
+     r"points: overflow float32 relative to the occluders \(first at index 20\)"),
 ]
 
 
