@@ -64,6 +64,11 @@ FULL_SWEEP = {**SWEEP, "shadow_map": {"resolution": [256, 1024, 2048, 4096, 8192
 FULL = {"ground": 1_000_000, "model": 200_000}
 QUICK = {"ground": 80_000, "model": 20_000}
 RESULTS = Path(__file__).resolve().parent / "results"
+# Seconds slept before each interleaved one-shot call. Mitsuba runs in this process, and its threads keep
+# the cores busy for a while after its call returns: measured on the default scene (medians of 9),
+# shadowcl's one-shot right after Mitsuba's took 55.2 ms, 0.2 s later 41.6, after its own call 43.5;
+# Mitsuba right after shadowcl's 27.5, 0.2 s later 26.6.
+SETTLE_S = 0.2
 PACKAGES = ("shadowcl", "numpy", "pyopencl", "pocl-binary-distribution", "embreex")  # versions in the report
 
 
@@ -346,8 +351,9 @@ def measure(case: Case, method: str, params: dict, truth: np.ndarray, repeats: i
 
 def interleave_oneshots(case: Case, rows: list[dict], repeats: int, device, peers: dict = PEERS) -> None:
     """Each of a case's ``rows`` timed again one-shot (a shadowcl method: ``sc.shadow_mask``; a peer: its
-    prepare + classify), in rounds that call every tool once (timing.interleaved), so that the load drift
-    of a shared machine hits them alike: ``oneshot_interleaved_s``, the time ``vs_peer`` compares."""
+    prepare + classify), in rounds that call every tool once (timing.interleaved, SETTLE_S before each
+    call), so that the load drift of a shared machine hits them alike: ``oneshot_interleaved_s``, the time
+    ``vs_peer`` compares."""
     fns, instances = {}, []
     try:
         for row in rows:
@@ -357,7 +363,7 @@ def interleave_oneshots(case: Case, rows: list[dict], repeats: int, device, peer
                 fns[row["label"]] = lambda instance=instances[-1]: peer_run(instance, case, [])
             else:
                 fns[row["label"]] = lambda name=name, params=params: one_shot(case, name, params, device)
-        timings = interleaved(fns, repeats)
+        timings = interleaved(fns, repeats, settle=SETTLE_S)
     finally:
         for instance in instances:
             close(instance)

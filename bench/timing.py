@@ -53,15 +53,18 @@ def timed(fn: Callable[[], Any], repeats: int, warmup: int = 1) -> Timing:
     return interleaved({None: fn}, repeats, warmup)[None]
 
 
-def interleaved(fns: dict, repeats: int, warmup: int = 1) -> dict:
+def interleaved(fns: dict, repeats: int, warmup: int = 1, settle: float = 0.0) -> dict:
     """:func:`timed` for several callables at once, in rounds that call each in ``fns``' order, so that a
-    shared machine's load drift hits all of them alike. Returns ``{name: Timing}``."""
+    shared machine's load drift hits all of them alike. ``settle`` seconds are slept before each timed
+    call, so that one tool's worker threads, still spinning after its call, do not slow the next one.
+    Returns ``{name: Timing}``."""
     for _ in range(warmup):
         for fn in fns.values():
             fn()
     timings = {name: Timing() for name in fns}
     for _ in range(max(repeats, 1)):
         for name, fn in fns.items():
+            time.sleep(settle)
             seconds, timings[name].result = clock(fn)
             timings[name].runs.append(seconds)
     return timings
