@@ -3,8 +3,9 @@
     python bench/scale.py [--quick] [--repeats 3]
 
 Two series, every tool end to end from NumPy arrays (shadowcl: the one-shot ``sc.shadow_mask``; a peer:
-its prepare + classify), interleaved per size so that load drift hits all alike, median of repeats after
-a warm-up, each mask checked against the exact one (the tool's row says how many receivers differ):
+its prepare + classify), interleaved per size so that load drift hits all alike (0.2 s apart: run.SETTLE_S),
+median of repeats after a warm-up, each mask checked against the exact one (the tool's row says how many
+receivers differ):
 
 - triangles: a "city" of n x n icospheres on a ground quad (not a mesh of ../shared/models), 20 k to
   2.5 M triangles, 1.2 M receivers (1 M on the ground, 200 k on the spheres) under a point light;
@@ -58,7 +59,7 @@ def measure(scene: rx.BenchScene, ground: int, model: int, repeats: int, device)
     calls = {"exact": lambda: run.one_shot(case, "exact", {}, device)}
     calls.update({name: (lambda peer=peer: run.peer_run(peer, case, [])) for name, peer in peers.items()})
     try:
-        timings = interleaved(calls, repeats)
+        timings = interleaved(calls, repeats, settle=run.SETTLE_S)
     finally:
         for peer in peers.values():
             run.close(peer)
