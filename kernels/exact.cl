@@ -52,6 +52,14 @@
 #define LISTS_LINKED 0
 #endif
 
+/* Whole packets of 8 move their receivers' rows and records as vectors, with clang's shuffles (the last,
+ * partial packet one receiver at a time) */
+#if LANES == 8 && defined(__clang__)
+#define WHOLE_PACKETS 1
+#else
+#define WHOLE_PACKETS 0
+#endif
+
 #define SC_FINITE(x) ((x) - (x) == 0.0f)
 #define WALK 0              /* receivers_start: the receiver needs a walk */
 
@@ -123,7 +131,7 @@ INLINE lint receivers_load_lanes(int base, int n, __global const input_t *points
     return LANE_LOAD(int, code);
 }
 
-#if LANES == 8 && defined(__clang__)
+#if WHOLE_PACKETS
 /* 4 and 8 input values in vectors; input4u at the input's own alignment, so that a row-major (N, 3)
  * array can be read 4 values at a time from any row (a vector load; vload4 is a library call on PoCL) */
 typedef input_t input4u __attribute__((ext_vector_type(4), aligned(sizeof(input_t))));
@@ -179,7 +187,7 @@ INLINE lint receivers_start(int base, int n, __global const input_t *points, __g
 {
     lfloat sx, sy, sz, nx, ny, nz;
     lint codes;
-#if LANES == 8 && defined(__clang__)
+#if WHOLE_PACKETS
     if (!(base + LANES <= n && receivers_load_rows(base, points, normals, cx, cy, cz, inv_scale, ox, oy, oz,
                                                    with_normals, &sx, &sy, &sz, &nx, &ny, &nz, &codes)))
 #endif
@@ -238,7 +246,7 @@ typedef struct {
     int cell;
 } Start;
 
-#if LANES == 8 && defined(__clang__)
+#if WHOLE_PACKETS
 /* The Starts of 8 consecutive receivers (lanes) and their codes, written as four 32-byte and one 8-byte
  * vector stores (the records transposed from the lanes by shuffles). start must be 32-byte aligned. */
 INLINE void store_starts8(__global Start *start, __global uchar *out, lfloat x, lfloat y, lfloat z, lint cell,
@@ -256,9 +264,7 @@ INLINE void store_starts8(__global Start *start, __global uchar *out, lfloat x, 
     r[3] = __builtin_shufflevector(xy_hi, zc_hi, 4, 5, 12, 13, 6, 7, 14, 15);
     *(__global uchar8 *)out = __builtin_convertvector(code, uchar8);
 }
-#endif
 
-#if LANES == 8 && defined(__clang__)
 /* 8 consecutive Start records (32-byte aligned) as lanes: four 32-byte loads, transposed by shuffles
  * (store_starts8's inverse) */
 INLINE void load_starts8(__global const Start *start, lfloat *x, lfloat *y, lfloat *z, lint *cell)
@@ -300,7 +306,7 @@ __kernel void exact_bin_count(BIN_ARGS, __global int *counts, __global int *slot
     const lint cells = (codes == WALK) ? receiver_cell(views, brute_cell, sx, sy, sz, &coarse) : (lint)-1;
     int cell[LANES];
     LANE_STORE(cells, cell);
-#if LANES == 8 && defined(__clang__)
+#if WHOLE_PACKETS
     if (base + LANES <= n)
         store_starts8(start + base, out + base, sx, sy, sz, cells, codes);
     else
@@ -465,7 +471,7 @@ NOINLINE void exact_classify_item(int base, __global const Start *binned, __glob
     lfloat x, y, z;
     lint cells;
     int fine[LANES], coarse[LANES], index[LANES], lane[LANES];
-#if LANES == 8 && defined(__clang__)
+#if WHOLE_PACKETS
     if (base + LANES <= nbinned) {
         load_starts8(binned + base, &x, &y, &z, &cells);
         LANE_STORE(cells, fine);
