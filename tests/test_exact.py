@@ -505,6 +505,26 @@ def test_receivers_at_the_light_are_answered_by_the_method(device, rng, order, v
     assert np.array_equal(public, at)
 
 
+@pytest.mark.parametrize("light_name", sorted(LIGHTS))
+def test_the_count_pass_bins_each_receiver_in_the_cell_point_cells_gives(device, rng, light_name):
+    """The count pass finds 8 receivers' cells at once, over lanes (ls_point_cells over lfloat: a cube
+    face's parameters picked by selects); lightspace.point_cells finds one point's, the same function over
+    a float (checked against the NumPy reference in test_lightspace). Every walked receiver's record must
+    name the cell point_cells gives its start, bit for bit, inside the window and far outside it."""
+    from shadowcl import lightspace
+    mesh = soup_mesh(rng, 150, 0.1)
+    points = np.concatenate([rng.uniform(-1.5, 1.5, (4000, 3)), rng.uniform(-60, 60, (1003, 3))])
+    bounds = np.array([[-1.5, -1.5, -1.5], [1.5, 1.5, 1.5]])
+    mask, method = classify(mesh, LIGHTS[light_name], points, device=device, receiver_bounds=bounds)
+    records = device.from_device(device.scratch("exact: receiver starts", 16 * len(points)), (len(points), 4), np.float32)
+    cells = records[:, 3].view(np.int32)
+    walked = cells >= 0
+    assert walked.mean() > 0.9
+    fine, _, w = lightspace.point_cells(device, method.grid, records[walked, :3])
+    behind = method.grid.cells                       # a point a single view cannot place: brute_cell
+    assert np.array_equal(cells[walked], np.where(w > 0, fine, behind) if method.grid.views.kind == "perspective" else fine)
+
+
 def test_shadow_mask_api_and_stats(device, rng):
     mesh = soup_mesh(rng, 100, 0.15)
     points = rng.uniform(-1.5, 1.5, (3000, 3))
