@@ -60,8 +60,9 @@
  * -> 11.7, 11.7, ogre 32.7, 38.2 -> 34.4, 35.0; one-shot default 58.5, 61.4 -> 49.2, 49.9 ms. */
 #define LS_COARSE_SHIFT 3
 #define LS_COARSE (1 << LS_COARSE_SHIFT)
-/* The coarse cell of fine cell (i, j) of view v */
-#define LS_COARSE_OF(v, i, j) (VIEW_BASE1(v) + ((j) >> LS_COARSE_SHIFT) * VIEW_NX1(v) + ((i) >> LS_COARSE_SHIFT))
+/* The coarse cell of fine cell (i, j) of a view whose coarse cells start at base1, nx1 of them a row
+ * (ints or lanes of ints) */
+#define LS_COARSE_OF(base1, nx1, i, j) ((base1) + ((j) >> LS_COARSE_SHIFT) * (nx1) + ((i) >> LS_COARSE_SHIFT))
 
 /* floor(q) clamped to [0, n - 1], for any q (inf and NaN included: NaN gives 0). Clamped first, then
  * truncated: the same integer as floor then clamp (q >= 0 there), without a floor per lane. */
@@ -126,7 +127,7 @@ INLINE lint ls_point_cells(__constant const float *views, lfloat px, lfloat py, 
 #endif
     *w = W;
     const lint i = ls_clamp_cell(X / W, nx), j = ls_clamp_cell(Y / W, ny);
-    *coarse = base1 + (j >> LS_COARSE_SHIFT) * nx1 + (i >> LS_COARSE_SHIFT);
+    *coarse = LS_COARSE_OF(base1, nx1, i, j);
     return base0 + j * nx + i;
 }
 
@@ -139,7 +140,7 @@ INLINE int ls_coarse_cell(__constant const float *views, int cell)
         k = (cell >= VIEW_BASE0(views + VIEW_FLOATS * m)) ? m : k;
     __constant const float *v = views + VIEW_FLOATS * k;
     const int k_cell = cell - VIEW_BASE0(v), j = k_cell / VIEW_NX(v), i = k_cell - j * VIEW_NX(v);
-    return LS_COARSE_OF(v, i, j);
+    return LS_COARSE_OF(VIEW_BASE1(v), VIEW_NX1(v), i, j);
 }
 
 #endif
