@@ -114,6 +114,25 @@ def test_random_scenes_match_reference(device, light_name, with_normals, test, l
                             f"{light_name}/{test}/{lists}/{order}")
 
 
+@pytest.mark.parametrize("order", ["cells", "caller"])
+@pytest.mark.parametrize("with_normals", [False, True], ids=["points", "normals"])
+@pytest.mark.parametrize("light_name", list(LIGHTS))
+def test_devices_without_doubles_match_reference(device, light_name, with_normals, order):
+    """A device without cl_khr_fp64 gets float32 points relative to the origin and unit normals from the
+    host (INPUT_F64 0); the count pass reads those rows as vectors too. Every answer outside the float32
+    band around edges is the reference's."""
+    mesh, points, normals = random_scene(7, with_normals)
+    light = LIGHTS[light_name]
+    method = ExactMethod(device, order=order)
+    method._fp64 = False                                 # as on such a device
+    method.prepare(mesh, light, np.stack([points.min(0), points.max(0)]), default_eps(mesh.bounds))
+    assert "-DINPUT_F64=0" in method._program
+    mask = method.classify(points, normals)
+    truth = reference_mask(7, with_normals, light_name)
+    if not np.array_equal(mask, truth):
+        check_against_reference(mask, mesh, light, points, normals, default_eps(mesh.bounds), f"float32 input/{light_name}")
+
+
 def test_view_kinds_of_the_random_lights(device):
     mesh, points, _ = random_scene(7, False)
     kinds = {name: classify(mesh, light, points[:10], device=device)[1].stats["view_kind"]
