@@ -441,18 +441,14 @@ NOINLINE lint walk_list(int c, lint active, lint hit, const Packet *p, __global 
 INLINE lint walk_cells(const int *cell, lint valid, lint hit, const Packet *p, __global const float *tris,
                        int ntris, int brute_cell, __global const int *lists_a, __global const int *lists_b)
 {
-    int done[LANES], valid_lane[LANES];
-    LANE_STORE(valid, valid_lane);
-    for (int j = 0; j < LANES; ++j)
-        done[j] = !valid_lane[j] || cell[j] < 0;
     const lint cells = LANE_LOAD(int, cell);
-    for (int j = 0; j < LANES; ++j) {
-        if (done[j])
-            continue;
-        const int c = cell[j];
-        for (int k = j; k < LANES; ++k)
-            done[k] = done[k] || cell[k] == c;
-        hit = walk_list(c, valid & (cells == c), hit, p, tris, ntris, brute_cell, lists_a, lists_b);
+    lint todo = valid & (cells >= 0);                 /* lanes whose cell is still to walk */
+    for (int j = 0; j < LANES && LANE_ANY(todo); ++j) {
+        const lint here = todo & (cells == cell[j]);  /* empty when lane j's cell was walked already */
+        if (LANE_ANY(here)) {
+            hit = walk_list(cell[j], here, hit, p, tris, ntris, brute_cell, lists_a, lists_b);
+            todo = todo & !here;
+        }
     }
     return hit;
 }
