@@ -61,6 +61,11 @@
 #endif
 
 #define SC_FINITE(x) ((x) - (x) == 0.0f)
+/* A coordinate moved into the working frame and made relative to the local origin, in the input
+ * precision (one receiver or lanes): as the host would, (x - c) * inv_scale - o */
+#define FRAME_MOVE(x, c, inv_scale, o) (((x) - (c)) * (inv_scale) - (o))
+/* A normal's squared length float32 holds well; outside it the normal is rescaled in the input precision */
+#define NORMAL_LEN2_OK(len2) (((len2) > 1.0e-30f) & ((len2) < 1.0e30f))
 #define WALK 0              /* receivers_start: the receiver needs a walk */
 
 #if LIGHT_POINT
@@ -74,8 +79,9 @@
 INLINE int receiver_point(int i, __global const input_t *points, input_t cx, input_t cy, input_t cz, input_t inv_scale,
                           input_t ox, input_t oy, input_t oz, float *px, float *py, float *pz)
 {
-    const float x = (float)((points[3 * i] - cx) * inv_scale - ox), y = (float)((points[3 * i + 1] - cy) * inv_scale - oy),
-                z = (float)((points[3 * i + 2] - cz) * inv_scale - oz);
+    const float x = (float)FRAME_MOVE(points[3 * i], cx, inv_scale, ox),
+                y = (float)FRAME_MOVE(points[3 * i + 1], cy, inv_scale, oy),
+                z = (float)FRAME_MOVE(points[3 * i + 2], cz, inv_scale, oz);
     *px = x; *py = y; *pz = z;
     return (SC_FINITE(x) & SC_FINITE(y) & SC_FINITE(z)) ? WALK : 3;
 }
@@ -87,7 +93,7 @@ INLINE int receiver_normal(int i, __global const input_t *normals, float *nx, fl
     const input_t mx = normals[3 * i], my = normals[3 * i + 1], mz = normals[3 * i + 2];
     float x = (float)mx, y = (float)my, z = (float)mz;
     const float len2 = x * x + y * y + z * z;
-    if (!(len2 > 1.0e-30f && len2 < 1.0e30f)) {
+    if (!NORMAL_LEN2_OK(len2)) {
         const input_t big = (mx < 0 ? -mx : mx) > (my < 0 ? -my : my) ? (mx < 0 ? -mx : mx) : (my < 0 ? -my : my);
         const input_t scale = big > (mz < 0 ? -mz : mz) ? big : (mz < 0 ? -mz : mz);
         if (!(scale > 0) || !(mx - mx == 0) || !(my - my == 0) || !(mz - mz == 0))
@@ -159,9 +165,9 @@ INLINE int receivers_load_rows(int base, __global const input_t *points, __globa
 {
     input8 x, y, z;
     load_rows8(points, base, &x, &y, &z);
-    *sx = __builtin_convertvector((x - cx) * inv_scale - ox, lfloat);
-    *sy = __builtin_convertvector((y - cy) * inv_scale - oy, lfloat);
-    *sz = __builtin_convertvector((z - cz) * inv_scale - oz, lfloat);
+    *sx = __builtin_convertvector(FRAME_MOVE(x, cx, inv_scale, ox), lfloat);
+    *sy = __builtin_convertvector(FRAME_MOVE(y, cy, inv_scale, oy), lfloat);
+    *sz = __builtin_convertvector(FRAME_MOVE(z, cz, inv_scale, oz), lfloat);
     *codes = (SC_FINITE(*sx) & SC_FINITE(*sy) & SC_FINITE(*sz)) ? (lint)WALK : (lint)3;
     *nx = *ny = *nz = (lfloat)1.0f;
     if (with_normals) {
@@ -169,7 +175,7 @@ INLINE int receivers_load_rows(int base, __global const input_t *points, __globa
         *nx = __builtin_convertvector(x, lfloat); *ny = __builtin_convertvector(y, lfloat);
         *nz = __builtin_convertvector(z, lfloat);
         const lfloat len2 = *nx * *nx + *ny * *ny + *nz * *nz;
-        if (LANE_ANY(!((len2 > 1.0e-30f) & (len2 < 1.0e30f))))
+        if (LANE_ANY(!NORMAL_LEN2_OK(len2)))
             return 0;
     }
     return 1;
