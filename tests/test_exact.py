@@ -738,3 +738,119 @@ def test_no_leaks_through_slivers(device, rng, n, height, light, order):
     assert len(points) > 1000
     mask = sc.shadow_mask(mesh, light, points, eps=1e-7, device=device, order=order)
     assert mask.all(), f"{int((~mask).sum())} of {len(points)} rays leak"
+
+
+# ---- ray_triangle.h: the float32 filter in front of the double refinement (WT_REFINE_F64) ----
+
+WT_PROBE = r'''
+#include "ray_triangle.h"
+/* Pair k (ray k, triangle k): hit = wt_hit as the walk calls it (filtered); refined = the triangle's
+ * inside lanes all refined in double (what wt_hit gave before the filter); certain = 2 inside + 1 when
+ * wt_certain decides in float32. The sheared vertices are restated here to get at inside and the bounds. */
+__kernel void wt_probe(__global const float *o, __global const float *d, __global const float *tri,
+                       __global const float *tmins, __global const float *tmaxs,
+                       __global uchar *hit, __global uchar *refined, __global uchar *certain)
+{
+    const int k = get_global_id(0);
+    const float tmin = tmins[k], tmax = tmaxs[k];
+    const WtRay r = wt_setup(o[3 * k], o[3 * k + 1], o[3 * k + 2], d[3 * k], d[3 * k + 1], d[3 * k + 2]);
+    __global const float *v = tri + 9 * k;
+    hit[k] = wt_hit(&r, v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8], tmin, tmax) != 0;
+    const float a0 = v[0] - r.ox, a1 = v[1] - r.oy, a2 = v[2] - r.oz;
+    const float b0 = v[3] - r.ox, b1 = v[4] - r.oy, b2 = v[5] - r.oz;
+    const float c0 = v[6] - r.ox, c1 = v[7] - r.oy, c2 = v[8] - r.oz;
+    const float ax = r.xx * a0 + r.xy * a1 + r.xz * a2, ay = r.yx * a0 + r.yy * a1 + r.yz * a2;
+    const float bx = r.xx * b0 + r.xy * b1 + r.xz * b2, by = r.yx * b0 + r.yy * b1 + r.yz * b2;
+    const float cx = r.xx * c0 + r.xy * c1 + r.xz * c2, cy = r.yx * c0 + r.yy * c1 + r.yz * c2;
+    const float az = r.zx * a0 + r.zy * a1 + r.zz * a2, bz = r.zx * b0 + r.zy * b1 + r.zz * b2;
+    const float cz = r.zx * c0 + r.zy * c1 + r.zz * c2;
+    const float U = cx * by - cy * bx, V = ax * cy - ay * cx, W = bx * ay - by * ax;
+    const int inside = ((U >= 0.0f) & (V >= 0.0f) & (W >= 0.0f)) | ((U <= 0.0f) & (V <= 0.0f) & (W <= 0.0f));
+    refined[k] = wt_refine(&r, inside, v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7], v[8], tmin, tmax) != 0;
+    certain[k] = 2 * inside + (wt_certain(ax, ay, az, bx, by, bz, cx, cy, cz, fabs(a0) + fabs(a1) + fabs(a2),
+                                          fabs(b0) + fabs(b1) + fabs(b2), fabs(c0) + fabs(c1) + fabs(c2), U, V, W,
+                                          U + V + W, U * az + V * bz + W * cz, tmin, tmax) != 0);
+}
+'''
+
+
+def wt_probe(device, tmp_path, origins, directions, triangles, tmin, tmax):
+    """(hit, refined, certain) per pair from the WT_PROBE kernel built on the shipped headers."""
+    from shadowcl.device import expand_includes
+    source = tmp_path / "wt_probe.cl"
+    source.write_text(WT_PROBE)
+    program = cl.Program(device.context, expand_includes(source, device.kernel_dir)).build(
+        ["-DWT_REFINE_F64=1", "-DLANES=1", "-cl-std=CL1.2"])
+    n = len(origins)
+    outputs = [device.empty(n) for _ in range(3)]
+    program.wt_probe(device.queue, (n,), None, *(device.to_device(np.ascontiguousarray(a, np.float32))
+                                                 for a in (origins, directions, triangles, tmin, tmax)), *outputs)
+    return tuple(device.from_device(b, n, np.uint8).astype(bool) if i < 2 else device.from_device(b, n, np.uint8)
+                 for i, b in enumerate(outputs))
+
+
+def aimed_pairs(rng, n, t_hit, point_light):
+    """n random triangles (sizes 1e-3 to 1e2, a third of them slivers of aspect ~1e-4) and rays aimed
+    at a random point of each, inside or just outside it, met at parameter ``t_hit`` (n,); a third of
+    the rays graze the triangle's plane. Point lights: tmax = 1, the ray ends at the light; directional:
+    unit directions and tmax = 1e30 (kernels/exact.cl TMAX). ``plain`` marks the pairs that are neither
+    slivers nor grazing, with the ray's origin within 100 triangle sizes."""
+    size = 10.0 ** rng.uniform(-3, 2, (n, 1, 1))
+    tri = rng.uniform(-1, 1, (n, 3, 3)) * size + rng.uniform(-50, 50, (n, 1, 3))
+    sliver = rng.random(n) < 1 / 3
+    tri[sliver, 2] = tri[sliver, 0] + (tri[sliver, 1] - tri[sliver, 0]) * rng.random((sliver.sum(), 1)) \
+        + rng.normal(0, 1e-4, (sliver.sum(), 3)) * size[sliver, 0]
+    tri = tri.astype(np.float32).astype(np.float64)             # the corners the kernel sees
+    bary = rng.dirichlet((1, 1, 1), n) * 1.02 - 0.02 / 3        # sums to 1; some just outside
+    target = np.einsum("ij,ijk->ik", bary, tri)
+    direction = rng.normal(size=(n, 3))
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    with np.errstate(invalid="ignore"):                          # a sliver rounded flat has no normal
+        normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    graze = rng.random(n) < 1 / 3
+    direction[graze] -= np.sum(direction[graze] * normal[graze], axis=1, keepdims=True) * normal[graze] * \
+        (1 - 10.0 ** rng.uniform(-6, -2, (graze.sum(), 1)))
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    if point_light:
+        direction *= 10.0 ** rng.uniform(-1, 2, (n, 1))          # the segment's length: the light's distance
+        tmax = np.ones(n)
+    else:
+        tmax = np.full(n, 1e30)
+    origins = target - t_hit[:, None] * direction
+    length = np.linalg.norm(direction, axis=1)
+    tmin = 1e-4 * size[:, 0, 0] / length
+    plain = ~sliver & ~graze & (np.linalg.norm(origins - target, axis=1) < 100 * size[:, 0, 0])
+    return origins, direction, tri, tmin, tmax, plain
+
+
+@pytest.mark.parametrize("point_light", [True, False], ids=["point", "directional"])
+def test_float32_filter_agrees_with_the_double_refinement(device, tmp_path, rng, point_light):
+    """wt_hit decides in float32 where its error bounds allow (wt_certain) and refines the other inside
+    lanes in double: on rays aimed at random triangles and slivers, grazing or not, with the hit
+    anywhere along the ray or within 1e-9 to 1e-3 (relative) of either end of the tested interval, it
+    answers exactly what refining every inside lane gives. The filter must decide most ordinary hits
+    itself (that is its point) and must leave hits at the interval's ends to the refinement."""
+    if "cl_khr_fp64" not in device.cl_device.extensions:
+        pytest.skip("the double refinement needs cl_khr_fp64")
+    n = 200_000
+    ordinary = rng.uniform(0.0, 1.0 if point_light else 100.0, n)
+    o, d, tri, tmin, tmax, plain = aimed_pairs(rng, n, ordinary, point_light)
+    hit, refined, certain = wt_probe(device, tmp_path, o, d, tri, tmin, tmax)
+    assert np.array_equal(hit, refined), f"{int((hit != refined).sum())} of {n} pairs differ"
+    inside = certain >= 2
+    assert inside.sum() > n // 2
+    # Decided in float32: plain pairs (measured 0.998-1.0); slivers and grazing rays go to the
+    # refinement far more often (measured 0-0.95 by distance), which is what it is for.
+    assert np.mean(certain[inside & plain] == 3) > 0.99
+    assert np.mean(certain[inside & ~plain] == 3) < 0.9
+    # hits at the ends: t_hit = tmin (1 + delta), and for point lights t_hit = 1 + delta
+    delta = rng.choice([-1, 1], n) * 10.0 ** rng.uniform(-9, -3, n)
+    o, d, tri, tmin, tmax, plain = aimed_pairs(rng, n, np.zeros(n), point_light)
+    at_start = rng.random(n) < 0.5 if point_light else np.ones(n, bool)
+    t_end = np.where(at_start, tmin, 1.0) * (1 + delta)
+    o = o - t_end[:, None] * d
+    hit, refined, certain = wt_probe(device, tmp_path, o, d, tri, tmin, tmax)
+    assert np.array_equal(hit, refined), f"{int((hit != refined).sum())} of {n} pairs differ"
+    inside = certain >= 2
+    assert np.mean(certain[inside & plain] == 2) > 0.2          # left to the refinement
+    assert 0 < refined.sum() < inside.sum()                     # hits on both sides of the ends

@@ -65,8 +65,12 @@ receivers on the ground + 200 k on the model, random order, PoCL on 2 cores; ran
   31-unit strip met at 0.04 degrees 0.01 from the receiver came out behind it (leaks on two of the
   eight sliver-prism cases of the tests). With doubles on the device (``WT_REFINE_F64``), a triangle
   found inside gets its distance again in double from the same float32 inputs: no leak, the same masks
-  on bunny, light_inside and the default scene, time within noise (86 / 82, 120 / 137, 51 / 50 ms on /
-  off). The plane cull's tolerance grows with how far a sliver's computed normal may lean
+  on bunny, light_inside and the default scene. Only where float32 cannot be sure: ray_triangle.h's
+  ``wt_certain`` bounds the rounding of T and det and refines the lanes whose comparisons lie within
+  the bounds (slivers, grazing rays, hits at an end of the interval; no lane of the bench scenes).
+  Refining every inside lane cost, in classify ms, interleaved medians of 9-15 (2026-12-02), refined
+  -> filtered, with / without normals: city of 4 icospheres 24.6 -> 17.6 / -, default 11.7 -> 9.7 /
+  33.9 -> 20.9, bunny - / 43.1 -> 33.2, light_inside - / 64.2 -> 54.2; masks identical. The plane cull's tolerance grows with how far a sliver's computed normal may lean
   (eps / sin of its angle, ``NORMAL_ULPS``); those cases did not need it, the bound says it can.
 - Large triangles in long coarse lists are binned by pieces (``split``, CSR only; :meth:`ExactMethod._split_lists`).
   A light inside a room (scenes/hard/light_inside.toml, cube of six views) had its walls, floor and
