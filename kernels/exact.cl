@@ -239,10 +239,12 @@ INLINE lint receiver_cell(__constant const float *views, int brute_cell, lfloat 
 #endif
 }
 
-/* The coarse cell of a receiver binned in fine cell `cell` (-1 for brute_cell), as receiver_cell gives */
-INLINE int receiver_coarse(__constant const float *views, int brute_cell, int cell)
+/* The coarse cell of a receiver binned in fine cell `cell` (-1 for brute_cell), as receiver_cell gives,
+ * and in *sub the fine cell's bit in it (LS_SUB_OF) */
+INLINE int receiver_coarse(__constant const float *views, int brute_cell, int cell, int *sub)
 {
-    return (cell == brute_cell) ? -1 : ls_coarse_cell(views, cell);
+    *sub = 0;
+    return (cell == brute_cell) ? -1 : ls_coarse_cell(views, cell, sub);
 }
 
 /* A binned receiver: its start s and its fine cell (16 bytes: the count pass's output, the fill's
@@ -413,9 +415,12 @@ INLINE lint packet_hits(const Packet *p, __global const float *tris, int t)
 #define RECORD_FLOATS (TEST_DOT5 ? DOT5_FLOATS : WT_FLOATS)
 
 /* `hit` or'ed with the lanes in `active` that a triangle of cell c's list shadows (brute_cell's list:
- * every triangle); stops when every active lane is shadowed. */
+ * every triangle); stops when every active lane is shadowed. masks (CSR coarse lists; else NULL): the
+ * list's entries' fine cells (lightspace.cl ls_fine_mask), an entry skipped unless it sets one of
+ * `fine` (the bits of the fine cells the active lanes are in). */
 NOINLINE lint walk_list(int c, lint active, lint hit, const Packet *p, __global const float *tris, int ntris,
-                      int brute_cell, __global const int *lists_a, __global const int *lists_b)
+                        int brute_cell, __global const int *lists_a, __global const int *lists_b,
+                        __global const ulong *masks, ulong fine)
 {
     active = active & !hit;
     if (c == brute_cell) {
@@ -430,8 +435,10 @@ NOINLINE lint walk_list(int c, lint active, lint hit, const Packet *p, __global 
     for (int node = lists_a[c]; node >= 0 && LANE_ANY(active); node = lists_b[2 * node + 1]) {
         const lint h = active & packet_hits(p, tris, lists_b[2 * node]);
 #else
-    const int end = lists_a[c + 1];
-    for (int k = lists_a[c]; k < end && LANE_ANY(active); ++k) {
+    const int begin = lists_a[c], end = lists_a[c + 1];
+    for (int k = begin; k < end && LANE_ANY(active); ++k) {
+        if (masks && !(masks[k - begin] & fine))
+            continue;
         if (k + PREFETCH_AHEAD < end)
             SC_PREFETCH(tris + RECORD_FLOATS * lists_b[k + PREFETCH_AHEAD], 0);
         const lint h = active & packet_hits(p, tris, lists_b[k]);
@@ -443,16 +450,30 @@ NOINLINE lint walk_list(int c, lint active, lint hit, const Packet *p, __global 
 }
 
 /* `hit` after walking, for each distinct cell among the valid lanes' `cell` (int per lane, -1: none),
- * that cell's list with the lanes in it */
-INLINE lint walk_cells(const int *cell, lint valid, lint hit, const Packet *p, __global const float *tris,
-                       int ntris, int brute_cell, __global const int *lists_a, __global const int *lists_b)
+ * that cell's list with the lanes in it. Coarse cells (sub: each lane's fine cell's bit in its coarse
+ * cell; NULL for fine cells) with masks (the coarse entries' fine cells, from the first coarse cell's
+ * entries on; NULL: none) skip the entries that touch none of the lanes' fine cells. */
+INLINE lint walk_cells(const int *cell, const int *sub, lint valid, lint hit, const Packet *p,
+                       __global const float *tris, int ntris, int brute_cell, __global const int *lists_a,
+                       __global const int *lists_b, __global const ulong *masks, int first_coarse)
 {
     const lint cells = LANE_LOAD(int, cell);
     lint todo = valid & (cells >= 0);                 /* lanes whose cell is still to walk */
     for (int j = 0; j < LANES && LANE_ANY(todo); ++j) {
         const lint here = todo & (cells == cell[j]);  /* empty when lane j's cell was walked already */
         if (LANE_ANY(here)) {
-            hit = walk_list(cell[j], here, hit, p, tris, ntris, brute_cell, lists_a, lists_b);
+            __global const ulong *list_masks = 0;
+            ulong fine = 0;
+#if !LISTS_LINKED
+            if (sub && masks && cell[j] != brute_cell) {
+                int lanes[LANES];
+                LANE_STORE(here, lanes);
+                for (int m = 0; m < LANES; ++m)
+                    fine |= lanes[m] ? (ulong)1 << sub[m] : (ulong)0;
+                list_masks = masks + (lists_a[cell[j]] - lists_a[first_coarse]);
+            }
+#endif
+            hit = walk_list(cell[j], here, hit, p, tris, ntris, brute_cell, lists_a, lists_b, list_masks, fine);
             todo = todo & !here;
         }
     }
@@ -461,18 +482,19 @@ INLINE lint walk_cells(const int *cell, lint valid, lint hit, const Packet *p, _
 
 /* Pass 3. Contract: binned, index: nbinned starts and receiver indices of pass 2; views: the grid; tris: triangle
  * records (see TEST_DOT5); lists_a, lists_b: (offsets, items) or (heads, nodes) over the grid's cells;
- * (lx, ly, lz): light position (relative) or direction; eps: as pass 1's; walk_coarse: 0 when no
+ * coarse_masks: the CSR coarse entries' fine cells (lightspace.py Lists.fine_masks) or NULL; (lx, ly, lz): light position (relative) or direction; eps: as pass 1's; walk_coarse: 0 when no
  * primitive is coarse (the coarse lists are empty). Writes out[index] for every binned receiver (of n). */
 NOINLINE void exact_classify_item(int base, __global const Start *binned, __global const int *binned_index,
                                   int nbinned, __constant const float *views, __global const float *tris, int ntris,
                                   int brute_cell, __global const int *lists_a, __global const int *lists_b,
-                                  float lx, float ly, float lz, float eps, int walk_coarse, int n, __global uchar *out)
+                                  __global const ulong *coarse_masks, float lx, float ly, float lz, float eps,
+                                  int walk_coarse, int n, __global uchar *out)
 {
     /* The lanes' receivers; lanes past the end repeat the last one and are not valid. Lanes of one cell
      * (most of them) share its coarse cell: found once. */
     lfloat x, y, z;
     lint cells;
-    int fine[LANES], coarse[LANES], index[LANES], lane[LANES];
+    int fine[LANES], coarse[LANES], sub[LANES], index[LANES], lane[LANES];
 #if WHOLE_PACKETS
     if (base + LANES <= nbinned) {
         load_starts8(binned + base, &x, &y, &z, &cells);
@@ -492,14 +514,20 @@ NOINLINE void exact_classify_item(int base, __global const Start *binned, __glob
         x = LANE_LOAD(float, sx); y = LANE_LOAD(float, sy); z = LANE_LOAD(float, sz);
     }
     for (int j = 0; j < LANES; ++j) {
-        coarse[j] = (j > 0 && fine[j] == fine[j - 1]) ? coarse[j - 1] : receiver_coarse(views, brute_cell, fine[j]);
+        if (j > 0 && fine[j] == fine[j - 1]) {
+            coarse[j] = coarse[j - 1];
+            sub[j] = sub[j - 1];
+        } else {
+            coarse[j] = receiver_coarse(views, brute_cell, fine[j], &sub[j]);
+        }
         lane[j] = base + j;
     }
     const lint valid = LANE_LOAD(int, lane) < nbinned;
     const Packet p = packet(x, y, z, start_tmin(x, y, z, lx, ly, lz, eps), lx, ly, lz);
-    lint hit = walk_cells(fine, valid, (lint)0, &p, tris, ntris, brute_cell, lists_a, lists_b);
+    lint hit = walk_cells(fine, 0, valid, (lint)0, &p, tris, ntris, brute_cell, lists_a, lists_b, 0, 0);
     if (walk_coarse)
-        hit = walk_cells(coarse, valid, hit, &p, tris, ntris, brute_cell, lists_a, lists_b);
+        hit = walk_cells(coarse, sub, valid, hit, &p, tris, ntris, brute_cell, lists_a, lists_b, coarse_masks,
+                         VIEW_BASE1(views));
     int hit_lane[LANES];
     LANE_STORE(hit, hit_lane);
     for (int j = 0; j < LANES && base + j < nbinned; ++j)
@@ -511,13 +539,14 @@ NOINLINE void exact_classify_item(int base, __global const Start *binned, __glob
  * function: vecmath.h says why) */
 __kernel void exact_classify(__global const Start *binned, __global const int *binned_index, int nbinned,
                              __constant const float *views, __global const float *tris, int ntris, int brute_cell,
-                             __global const int *lists_a, __global const int *lists_b, float lx, float ly, float lz,
-                             float eps, int walk_coarse, int n, __global uchar *out)
+                             __global const int *lists_a, __global const int *lists_b,
+                             __global const ulong *coarse_masks, float lx, float ly, float lz, float eps,
+                             int walk_coarse, int n, __global uchar *out)
 {
     const int base = LANES * get_global_id(0);
     if (base < nbinned)
         exact_classify_item(base, binned, binned_index, nbinned, views, tris, ntris, brute_cell, lists_a, lists_b,
-                            lx, ly, lz, eps, walk_coarse, n, out);
+                            coarse_masks, lx, ly, lz, eps, walk_coarse, n, out);
 }
 
 #if LANES == 1
@@ -525,8 +554,8 @@ __kernel void exact_classify(__global const Start *binned, __global const int *b
  * short and end early (exact.py's module docstring). Arguments as exact_bin_count's, then the walk's; writes out[i]
  * and counts in *behind (zeroed) the points binned in brute_cell. */
 __kernel void exact_classify_points(BIN_ARGS, __global const float *tris, int ntris, __global const int *lists_a,
-                                    __global const int *lists_b, int walk_coarse, __global int *behind,
-                                    __global uchar *out)
+                                    __global const int *lists_b, __global const ulong *coarse_masks, int walk_coarse,
+                                    __global int *behind, __global uchar *out)
 {
     const int i = get_global_id(0);
     if (i >= n)
@@ -543,9 +572,13 @@ __kernel void exact_classify_points(BIN_ARGS, __global const float *tris, int nt
     if (fine == brute_cell)
         atomic_inc(behind);
     const Packet p = packet(sx, sy, sz, start_tmin(sx, sy, sz, lx, ly, lz, eps), lx, ly, lz);
-    int hit = walk_list(fine, 1, 0, &p, tris, ntris, brute_cell, lists_a, lists_b);
-    if (walk_coarse && coarse >= 0)
-        hit = walk_list(coarse, 1, hit, &p, tris, ntris, brute_cell, lists_a, lists_b);
+    int hit = walk_cells(&fine, 0, 1, 0, &p, tris, ntris, brute_cell, lists_a, lists_b, 0, 0);
+    if (walk_coarse && coarse >= 0) {
+        int sub;
+        receiver_coarse(views, brute_cell, fine, &sub);
+        hit = walk_cells(&coarse, &sub, 1, hit, &p, tris, ntris, brute_cell, lists_a, lists_b, coarse_masks,
+                         VIEW_BASE1(views));
+    }
     out[i] = (uchar)(hit != 0);
 }
 #endif

@@ -63,6 +63,8 @@
 /* The coarse cell of fine cell (i, j) of a view whose coarse cells start at base1, nx1 of them a row
  * (ints or lanes of ints) */
 #define LS_COARSE_OF(base1, nx1, i, j) ((base1) + ((j) >> LS_COARSE_SHIFT) * (nx1) + ((i) >> LS_COARSE_SHIFT))
+/* Fine cell (i, j)'s bit in a coarse entry's mask of the fine cells it touches (lightspace.cl ls_fine_mask) */
+#define LS_SUB_OF(i, j) (((i) & (LS_COARSE - 1)) | (((j) & (LS_COARSE - 1)) << LS_COARSE_SHIFT))
 
 /* floor(q) clamped to [0, n - 1], for any q (inf and NaN included: NaN gives 0). Clamped first, then
  * truncated: the same integer as floor then clamp (q >= 0 there), without a floor per lane. */
@@ -131,15 +133,16 @@ INLINE lint ls_point_cells(__constant const float *views, lfloat px, lfloat py, 
     return base0 + j * nx + i;
 }
 
-/* The coarse cell of fine cell `cell` (numbered over all views, as ls_point_cells gives it): its view is
- * the last whose fine cells start at or before it. */
-INLINE int ls_coarse_cell(__constant const float *views, int cell)
+/* The coarse cell of fine cell `cell` (numbered over all views, as ls_point_cells gives it), and in *sub
+ * the fine cell's bit in it (LS_SUB_OF): its view is the last whose fine cells start at or before it. */
+INLINE int ls_coarse_cell(__constant const float *views, int cell, int *sub)
 {
     int k = 0;
     for (int m = 1; m < NVIEWS; ++m)
         k = (cell >= VIEW_BASE0(views + VIEW_FLOATS * m)) ? m : k;
     __constant const float *v = views + VIEW_FLOATS * k;
     const int k_cell = cell - VIEW_BASE0(v), j = k_cell / VIEW_NX(v), i = k_cell - j * VIEW_NX(v);
+    *sub = LS_SUB_OF(i, j);
     return LS_COARSE_OF(VIEW_BASE1(v), VIEW_NX1(v), i, j);
 }
 

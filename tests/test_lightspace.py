@@ -224,13 +224,16 @@ def test_csr_fill_past_a_cells_slots_is_counted_not_written(device, rng):
     counts, records = device.empty(4 * grid.cells), device.empty(16 * len(corners))
     cl.enqueue_fill_buffer(queue, counts, np.int32(0), 0, 4 * grid.cells)
     csr, n = builder._kernel(grid, "ls_csr"), np.int32(len(corners))
-    csr(queue, (n,), None, prims, n, lists.params, counts, records, np.int32(0), counts, counts, counts)   # count
+    no_masks = (np.int32(0), None)
+    csr(queue, (n,), None, prims, n, lists.params, counts, records, np.int32(0), counts, counts, counts,
+        *no_masks)                                                                                      # count
     tiny = np.minimum(lengths, 1).astype(np.int32)          # capacity 1 per non-empty cell
     cl.enqueue_copy(queue, counts, tiny)
     sentinel, canary = -7, 4096
     out = np.full(len(items) + canary, sentinel, np.int32)
     out_dev, dropped = device.to_device(out), device.to_device(np.zeros(1, np.int32))
-    csr(queue, (n,), None, prims, n, lists.params, counts, records, np.int32(1), lists.offsets, out_dev, dropped)
+    csr(queue, (n,), None, prims, n, lists.params, counts, records, np.int32(1), lists.offsets, out_dev, dropped,
+        *no_masks)
     got = device.from_device(out_dev, len(out), np.int32)
     assert int(device.from_device(dropped, 1, np.int32)[0]) == int(np.sum(lengths - tiny))
     first = offsets[:-1][lengths > 0]
@@ -305,3 +308,48 @@ BAD_INPUTS = [
 def test_bad_input_is_named(small_buffer_device, call, error, message):
     with pytest.raises(error, match=message):
         call(small_buffer_device)
+
+
+@pytest.mark.parametrize("light_name", list(LIGHTS))
+def test_coarse_entries_fine_masks(device, rng, light_name):
+    """A coarse entry's fine mask (Lists.fine_masks) sets every fine cell of its coarse cell that the
+    primitive's exact projection touches (the reference at the fine level, delta 0: the walk skips the
+    entry for the other fine cells, so a missing bit would be a leak), and no interior fine cell farther
+    than UPPER_DELTA from it (border cells are always set); no bit lies outside the grid."""
+    light, _ = LIGHTS[light_name]
+    corners = np.concatenate([soup(rng, 250, 0.04), soup(rng, 12, 0.6)])
+    corners32 = np.ascontiguousarray(corners, dtype=np.float32)
+    prims = device.to_device(corners32)
+    views = ls.fit_to_footprint(device, ls.fit_views(light, BOUNDS, np.zeros(3), 3.0), prims, len(corners32))
+    grid = ls.make_grid(views, cells=6 * 40 * 40)
+    lists = ls.ListBuilder(device).build(grid, prims, len(corners32), fine_masks=True)
+    offsets, items = lists.to_host(device)
+    assert lists.coarse_entries > 0
+    masks = device.from_device(lists.fine_masks, lists.coarse_entries, np.uint64)
+    first = offsets[grid.fine_cells]
+    v = grid.views
+    args = (corners32, v.kind, v.eye, v.axes, v.windows, v.domains, grid.nx, grid.ny)
+    touched, near = (ref.cell_lists(*args, d, level=0) for d in (0.0, UPPER_DELTA))
+    bit = 1 << np.arange(64, dtype=np.uint64)
+    checked = missing = extra = 0
+    for view in range(v.nviews):
+        nx, ny, nx1, ny1 = grid.nx[view], grid.ny[view], grid.nx1[view], grid.ny1[view]
+        for c in range(nx1 * ny1):
+            cell = grid.base1[view] + c
+            cj, ci = divmod(c, nx1)
+            for k in range(offsets[cell], offsets[cell + 1]):
+                p, mask = items[k], masks[k - first]
+                for b in range(64):
+                    i, j = ci * ls.COARSE + b % ls.COARSE, cj * ls.COARSE + b // ls.COARSE
+                    is_set = bool(mask & bit[b])
+                    if i >= nx or j >= ny:
+                        extra += is_set
+                        continue
+                    fine = grid.base0[view] + j * nx + i
+                    border = i in (0, nx - 1) or j in (0, ny - 1)
+                    checked += 1
+                    missing += touched[fine, p] and not is_set
+                    extra += is_set and not near[fine, p] and not border
+    assert checked > 1000
+    assert missing == 0, f"{light_name}: {missing} touched fine cells unset of {checked}"
+    assert extra == 0, f"{light_name}: {extra} fine cells set farther than {UPPER_DELTA} cell or off the grid"

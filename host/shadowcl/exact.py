@@ -252,7 +252,8 @@ class ExactMethod(Method):
         cells = lightspace.pick_cell_count(ntris, self.expected_receivers)
         grid = lightspace.make_grid(views, cells=cells, resolution=self.resolution)
         t2 = time.perf_counter()
-        lists = self._builder.build(grid, tris_dev, ntris, self.lists_kind, self.initial_capacity)
+        lists = self._builder.build(grid, tris_dev, ntris, self.lists_kind, self.initial_capacity,
+                                    fine_masks=self.lists_kind == "csr")
         split = dict(split_triangles=0, split_pieces=0, split_rounds=0)
         if self.split and self.lists_kind == "csr" and \
                 lists.coarse_entries > SPLIT_PER_COARSE_CELL * (grid.cells - grid.fine_cells):
@@ -267,7 +268,8 @@ class ExactMethod(Method):
         self._program = options
         self._prepared = True
         self.stats = dict(lists.stats)
-        device_bytes = sum(b.size for b in (tris_dev, records, *lists.buffers(), lists.params) if b is not None)
+        device_bytes = sum(b.size for b in (tris_dev, records, *lists.buffers(), lists.fine_masks, lists.params)
+                           if b is not None)
         self.stats.update(
             triangles=ntris, lists=self.lists_kind, test=self.test, device_bytes=int(device_bytes), **split,
             # entries per fine cell; linked lists do not know their coarse share, so it is counted in there
@@ -435,8 +437,8 @@ class ExactMethod(Method):
             behind = dev.scratch("exact: points behind the view", 4)
             cl.enqueue_fill_buffer(queue, behind, np.int32(0), 0, 4)
             dev.kernel("exact.cl", "exact_classify_points", options)(
-                queue, (n,), None, *bin_args, self._records, np.int32(self._ntris), lists_a, lists_b, walk_coarse,
-                behind, out_dev)
+                queue, (n,), None, *bin_args, self._records, np.int32(self._ntris), lists_a, lists_b,
+                self.lists.fine_masks, walk_coarse, behind, out_dev)
             return dev.from_device(out_dev, n, np.uint8), int(dev.from_device(behind, 1, np.int32)[0])
         counts = dev.scratch("exact: receiver cell counts", 4 * (brute_cell + 1))
         cl.enqueue_fill_buffer(queue, counts, np.int32(0), 0, 4 * (brute_cell + 1))
@@ -457,8 +459,8 @@ class ExactMethod(Method):
             packets = -(-binned_count // BIN_LANES)
             dev.kernel("exact.cl", "exact_classify", options)(
                 queue, (packets,), None, by_cell, index, np.int32(binned_count), self.lists.params, self._records,
-                np.int32(self._ntris), np.int32(brute_cell), lists_a, lists_b, *light, np.float32(self.eps), walk_coarse,
-                np.int32(n), out_dev)
+                np.int32(self._ntris), np.int32(brute_cell), lists_a, lists_b, self.lists.fine_masks, *light,
+                np.float32(self.eps), walk_coarse, np.int32(n), out_dev)
         brute_start = np.empty(1, np.int32)
         cl.enqueue_copy(queue, brute_start, offsets, src_offset=4 * brute_cell)
         return dev.from_device(out_dev, n, np.uint8), binned_count - int(brute_start[0])

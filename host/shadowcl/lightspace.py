@@ -30,7 +30,11 @@ between views in proportion to their small primitives.
 :data:`COARSE` x :data:`COARSE` fine cells per cell. A primitive with more candidate cells than a coarse
 cell holds (a ground quad, a wall) is listed in the coarse grid only: a few entries instead of thousands
 (the bench's ground quad, measured with 16 x 16 coarse cells: ~300 instead of ~600 k). A receiver walks
-its fine and its coarse cell's lists. The outermost rows and columns of cells extend to the edge of the view's
+its fine and its coarse cell's lists. CSR lists built with ``fine_masks`` also give each coarse entry the
+fine cells of its coarse cell that the primitive may touch (a 64-bit mask, the fine level's own test),
+so a walk skips the coarse entries that touch none of its fine cells: the fine level's short walks at
+the coarse level's build (a light inside a room, 1.2 M receivers, classify 23.9 -> 15.6 ms with normals,
+46.6 -> 34.3 without; the default scene's build ~1 ms longer for a walk ~1.4 ms shorter). The outermost rows and columns of cells extend to the edge of the view's
 *domain* (the whole plane for a single view, the face's square for a cube face): a primitive
 projecting beyond the window is listed in the border cells it reaches, and a point projecting outside
 the window (outside the prepared receiver bounds) falls into the nearest border cell, so
@@ -324,8 +328,11 @@ def make_grid(views: LightViews, cells: int | None = None, resolution: int | Non
 class Lists:
     """Per-cell primitive lists on the device, and what building them cost.
 
-    CSR: ``offsets`` (cells + 1 ints) and ``items`` (entries ints). Linked: ``heads`` (cells ints, -1 =
-    empty) and ``nodes`` (2 ints per node: primitive, next). ``stats`` holds counts and stage times (s).
+    CSR: ``offsets`` (cells + 1 ints) and ``items`` (entries ints); built with ``fine_masks``, also
+    ``fine_masks`` (one uint64 per coarse entry, in the items' order from the first coarse cell's: bit
+    ``(i % COARSE) + COARSE * (j % COARSE)`` set for each fine cell (i, j) the entry's primitive may touch).
+    Linked: ``heads`` (cells ints, -1 = empty) and ``nodes`` (2 ints per node: primitive, next).
+    ``stats`` holds counts and stage times (s).
     """
 
     kind: str
@@ -338,6 +345,7 @@ class Lists:
     nodes: cl.Buffer | None = None
     capacity: int = 0
     coarse_entries: int = -1          # entries in coarse cells (-1: unknown, linked lists)
+    fine_masks: cl.Buffer | None = None
     params: cl.Buffer | None = None
     stats: dict = field(default_factory=dict)
 
@@ -381,8 +389,9 @@ class ListBuilder:
         return self.device.kernel("lightspace.cl", name, (f"-DCORNERS={self.corners}",) + grid.options)
 
     def build(self, grid: Grid, prims: cl.Buffer, nprims: int, kind: str = "csr",
-              initial_capacity: int | None = None) -> Lists:
-        """Lists of the ``nprims`` primitives in ``prims`` ((P, K, 3) float32 on the device) over ``grid``."""
+              initial_capacity: int | None = None, fine_masks: bool = False) -> Lists:
+        """Lists of the ``nprims`` primitives in ``prims`` ((P, K, 3) float32 on the device) over ``grid``;
+        ``fine_masks`` (CSR): each coarse entry's fine cells too (:class:`Lists`)."""
         if kind not in ("csr", "linked"):
             raise ValueError(f"lists: expected 'csr' or 'linked', got {kind!r}")
         dev, queue = self.device, self.device.queue
@@ -404,8 +413,9 @@ class ListBuilder:
             dropped = dev.scratch("lightspace: dropped entries", 4)
             cl.enqueue_fill_buffer(queue, dropped, np.int32(0), 0, 4)
             csr = self._kernel(grid, "ls_csr")
+            masks_flag = np.int32(bool(fine_masks))
             csr(queue, gsize, None, prims, np.int32(nprims), params, self._counts, records, np.int32(0), dropped,
-                dropped, dropped)                    # count: the fill's buffers unused
+                dropped, dropped, masks_flag, None)  # count: the fill's buffers unused
             queue.finish()
             t1 = time.perf_counter()
             offsets = dev.empty(4 * (cells + 1), "light-space offsets")
@@ -416,14 +426,16 @@ class ListBuilder:
                 raise ValueError(f"resolution: the lists need {total} entries, more than {dev.name} holds in one "
                                  f"buffer ({limit}); lower the resolution")
             items = dev.empty(4 * max(total, 1), "light-space lists")
-            csr(queue, gsize, None, prims, np.int32(nprims), params, self._counts, records, np.int32(1), offsets,
-                items, dropped)
-            check_filled(dev, dropped, "lightspace: the lists' fill")
-            t3 = time.perf_counter()
-            lists.offsets, lists.items, lists.entries, lists.capacity = offsets, items, total, total
             fine = np.empty(1, np.int32)
             cl.enqueue_copy(queue, fine, offsets, src_offset=4 * grid.fine_cells)
             lists.coarse_entries = total - int(fine[0])
+            if fine_masks:
+                lists.fine_masks = dev.empty(8 * max(lists.coarse_entries, 1), "light-space coarse entries' fine cells")
+            csr(queue, gsize, None, prims, np.int32(nprims), params, self._counts, records, np.int32(1), offsets,
+                items, dropped, masks_flag, lists.fine_masks)
+            check_filled(dev, dropped, "lightspace: the lists' fill")
+            t3 = time.perf_counter()
+            lists.offsets, lists.items, lists.entries, lists.capacity = offsets, items, total, total
             lists.stats.update(project_count_s=t1 - t0, scan_s=t2 - t1, fill_s=t3 - t2, rebuilds=0)
         else:
             capacity = int(initial_capacity) if initial_capacity is not None else max(1024, 8 * nprims)
