@@ -482,8 +482,9 @@ INLINE lint walk_cells(const int *cell, const int *sub, lint valid, lint hit, co
 
 /* Pass 3. Contract: binned, index: nbinned starts and receiver indices of pass 2; views: the grid; tris: triangle
  * records (see TEST_DOT5); lists_a, lists_b: (offsets, items) or (heads, nodes) over the grid's cells;
- * coarse_masks: the CSR coarse entries' fine cells (lightspace.py Lists.fine_masks) or NULL; (lx, ly, lz): light position (relative) or direction; eps: as pass 1's; walk_coarse: 0 when no
- * primitive is coarse (the coarse lists are empty). Writes out[index] for every binned receiver (of n). */
+ * coarse_masks: the CSR coarse entries' fine cells (lightspace.py Lists.fine_masks) or NULL; (lx, ly, lz):
+ * light position (relative) or direction; eps: as pass 1's; walk_coarse: 0 when no primitive is coarse (the
+ * coarse lists are empty). Writes out[index] for every binned receiver (of n). */
 NOINLINE void exact_classify_item(int base, __global const Start *binned, __global const int *binned_index,
                                   int nbinned, __constant const float *views, __global const float *tris, int ntris,
                                   int brute_cell, __global const int *lists_a, __global const int *lists_b,
