@@ -230,3 +230,26 @@ def test_scale_series_rows_and_exponents(device):
     assert rows[0]["triangles"] == 20 * 4**2 + 2 and rows[-1]["triangles"] == 4 * 20 * 4**2 + 2
     fits = scale.exponents(rows, "triangles")
     assert set(fits) == tools and all(np.isfinite(e) for e in fits.values())
+
+
+def test_kernels_ab_times_variants_and_compares_masks(tmp_path, capsys):
+    """bench/kernels_ab.py on a tiny city with two kernels folders, the second with the walk's answers
+    inverted: per-kernel rows for each variant, a one-shot median, and the inversion seen in the mask
+    count (so the variants really ran their own kernels)."""
+    import shutil
+
+    import kernels_ab
+    from shadowcl.device import KERNEL_DIR
+
+    same, inverted = tmp_path / "same", tmp_path / "inverted"
+    shutil.copytree(KERNEL_DIR, same)
+    shutil.copytree(KERNEL_DIR, inverted)
+    source = (inverted / "exact.cl").read_text()
+    line = "            out[index[j]] = (uchar)(hit_lane[j] != 0);"
+    assert line in source
+    (inverted / "exact.cl").write_text(source.replace(line, line.replace("!= 0", "== 0")))
+    kernels_ab.main(["city:1:2", str(same), str(inverted), "--rounds", "1", "--ground", "1500", "--model", "500"])
+    out = capsys.readouterr().out
+    assert "exact_classify" in out and "exact_bin_count" in out and "one-shot call" in out
+    differs = int(out.rsplit("differs from the first on ", 1)[1].split()[0])
+    assert 0 < differs <= 2000
