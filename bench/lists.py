@@ -57,7 +57,9 @@ def group_prefix_sum(program: cl.Program):
     kernels = {name: cl.Kernel(program, name) for name in ("scan_group_sums", "scan_groups")}
     group, most, least = 128, 256, 8
 
-    def prefix_sum(device, kernel, counts, n, offsets):
+    def prefix_sum(device, kernel, counts, n, offsets, second_row=0):
+        if second_row:
+            raise ValueError("second_row: that revision scanned one row of counts")
         queue = device.queue
         per_item = max(least, -(-n // (most * group)))
         ngroups = max(1, -(-n // (group * per_item)))

@@ -10,9 +10,10 @@
  * then the walk in the irregular Z-buffer's traversal order (the receivers of a cell together):
  *   exact_bin_count  per LANES receivers: check them, start them (s, over lanes), find each one's fine
  *                    cell, write its Start (s and the cell) in the caller's order and take a slot in the
- *                    cell (atomic_inc on its count); the code of a receiver needing no walk
- *   (host)           exclusive prefix sum of the counts (lightspace.ListBuilder.prefix_sum)
- *   exact_bin_fill   per receiver with a slot: its Start and its index at its cell's offset + its slot
+ *                    cell (by atomic_inc on its count, or _ends: two halves binned serially, one filling
+ *                    the cells from the front, one from the back); the code of a receiver needing no walk
+ *   (device)         exclusive prefix sum of the counts (lists.prefix_sum)
+ *   exact_bin_fill   per receiver with a slot: its Start and its index at its place in its cell
  *   exact_classify   per packet of LANES consecutive binned receivers (tmin from s, the coarse cell
  *                    from the fine one): the receivers of a cell share its list,
  *                    each triangle is loaded once and tested against all the packet's lanes still
@@ -295,24 +296,21 @@ INLINE void load_starts8(__global const Start *start, lfloat *x, lfloat *y, lflo
         input_t cz, input_t inv_scale, input_t ox, input_t oy, input_t oz, __constant const float *views, \
         int brute_cell, float lx, float ly, float lz, float eps, int with_normals
 
-/* Pass 1, LANES receivers per work-item. Contract: points (n x 3, float32 relative to the local origin,
- * or float64 with INPUT_F64, the frame's move in (cx, cy, cz, inv_scale) and the origin in (ox, oy,
- * oz)), normals likewise if with_normals (any non-zero length); views: the grid the lists were built on;
- * counts: brute_cell + 1 ints, zeroed; start: 32-byte aligned. Writes out[i] (the code of a receiver
- * needing no walk, else 0), start[i] (its start and cell, -1 when it needs no walk) and slot[i] (its
- * rank in its cell, -1 when it needs no walk). */
-__kernel void exact_bin_count(BIN_ARGS, __global int *counts, __global int *slot, __global uchar *out,
-                              __global Start *start)
+#define BIN_ARG_NAMES points, normals, n, cx, cy, cz, inv_scale, ox, oy, oz, views, brute_cell, lx, ly, lz, eps, with_normals
+
+/* Pass 1's work on the packet of receivers base .. base + LANES - 1 (those below n): out[i] (the code of
+ * a receiver needing no walk, else 0) and start[i] (its start and cell, -1 when it needs no walk)
+ * written, the cells in cell[]. Contract: points (n x 3, float32 relative to the local origin, or float64
+ * with INPUT_F64, the frame's move in (cx, cy, cz, inv_scale) and the origin in (ox, oy, oz)), normals
+ * likewise if with_normals (any non-zero length); views: the grid the lists were built on; start: 32-byte
+ * aligned. */
+INLINE void bin_packet(int base, BIN_ARGS, __global uchar *out, __global Start *start, int *cell)
 {
-    const int base = LANES * get_global_id(0);
-    if (base >= n)
-        return;
     lfloat sx, sy, sz;
     const lint codes = receivers_start(base, n, points, normals, cx, cy, cz, inv_scale, ox, oy, oz, lx, ly, lz, eps,
                                        with_normals, &sx, &sy, &sz);
     lint coarse;
     const lint cells = (codes == WALK) ? receiver_cell(views, brute_cell, sx, sy, sz, &coarse) : (lint)-1;
-    int cell[LANES];
     LANE_STORE(cells, cell);
 #if WHOLE_PACKETS
     if (base + LANES <= n)
@@ -329,10 +327,54 @@ __kernel void exact_bin_count(BIN_ARGS, __global int *counts, __global int *slot
             out[base + j] = (uchar)code[j];
         }
     }
-    /* The atomics last and back to back: each drains the stores before it, and interleaved with the
-     * starts' stores they cost twice as much (bunny bench: the pass 21 -> 15 ms) */
+}
+
+/* Pass 1 also gives each walking receiver its slot in its cell (slot[i], -1 for none), counted in counts,
+ * which the prefix sum turns into the fill's offsets. A slot is rank << 1 | end: the receiver goes rank
+ * places from its cell's front (end 0) or back (end 1). Two ways, the host picks one for its device:
+ *   exact_bin_count       one packet per work-item, a front slot by atomic_inc on its cell's count (a GPU's
+ *                         way, or a CPU's with many cores; counts: brute_cell + 1 ints, zeroed). The
+ *                         atomics come last and back to back: each drains the stores before it, and
+ *                         interleaved with the starts' stores they cost twice as much (bunny bench: the
+ *                         pass 21 -> 15 ms).
+ *   exact_bin_count_ends  2 work-items (local size 1), each binning half the packets serially and counting
+ *                         them in a row of its own, counts[end (brute_cell + 2) + cell]: no atomics (on a
+ *                         2-core CPU the pass 8.6-10.4 -> 5.0-8.2 ms), and no cache line shared between
+ *                         the two (counters interleaved, (cell, owner) side by side, went back and forth
+ *                         between the cores: 9.3 ms against 9.6 with atomics). The first half fills its
+ *                         cells from the front, the second from the back, so that the offsets stay one per
+ *                         cell (per (cell, owner) offsets made the fill 5.2 -> 8.5 ms on ogre) and a
+ *                         cell's receivers stay together. counts: 2 (brute_cell + 2) ints, zeroed; the
+ *                         prefix sum adds the rows (lists.h second_row); each row's last entry collects
+ *                         the receivers that need no walk (not scanned), so that the loop has no branch. */
+__kernel void exact_bin_count(BIN_ARGS, __global int *counts, __global int *slot, __global uchar *out,
+                              __global Start *start)
+{
+    const int base = LANES * get_global_id(0);
+    if (base >= n)
+        return;
+    int cell[LANES];
+    bin_packet(base, BIN_ARG_NAMES, out, start, cell);
     for (int j = 0; j < LANES && base + j < n; ++j)
-        slot[base + j] = (cell[j] >= 0) ? atomic_inc(&counts[cell[j]]) : -1;
+        slot[base + j] = (cell[j] >= 0) ? atomic_inc(&counts[cell[j]]) << 1 : -1;
+}
+
+__kernel void exact_bin_count_ends(BIN_ARGS, int per_end, __global int *counts, __global int *slot,
+                                   __global uchar *out, __global Start *start)
+{
+    const int end = get_global_id(0), spare = brute_cell + 1;
+    const int last = SC_IMIN(n, (end + 1) * per_end * LANES);
+    __global int *row = counts + end * (brute_cell + 2);
+    for (int base = end * per_end * LANES; base < last; base += LANES) {
+        int cell[LANES];
+        bin_packet(base, BIN_ARG_NAMES, out, start, cell);
+        for (int j = 0; j < LANES && base + j < n; ++j) {
+            const int k = cell[j] >= 0 ? cell[j] : spare;
+            const int rank = row[k];
+            row[k] = rank + 1;
+            slot[base + j] = (cell[j] >= 0) ? (rank << 1) | end : -1;
+        }
+    }
 }
 
 /* Pass 2's look-ahead for its scattered writes. Against none, interleaved in one process, medians of 11,
@@ -340,13 +382,20 @@ __kernel void exact_bin_count(BIN_ARGS, __global int *counts, __global int *slot
  * default 5.0 -> 4.9 / 6.8 -> 4.7, light_inside 4.4 -> 5.3 / 6.7 -> 5.3 (16 and 32 ahead did no better). */
 #define FILL_AHEAD 64
 
-/* Pass 2: every receiver with a slot copies its start to binned[k] and its index to index[k], k =
- * offsets[its cell] + its slot (offsets: the exclusive prefix sum of pass 1's counts), so that they
- * list the receivers cell by cell. A slot past its cell's end (a bug) is not written but counted in
- * *dropped, which the host checks. */
+/* Where the receiver with slot s in the cell [lo, hi) of the binned arrays goes */
+INLINE int slot_place(int s, int lo, int hi)
+{
+    return (s & 1) ? hi - 1 - (s >> 1) : lo + (s >> 1);
+}
+
+/* Pass 2: every receiver with a slot copies its start to binned[k] and its index to index[k], k its place
+ * in its cell (slot_place, the cell's bounds from offsets: the exclusive prefix sum of pass 1's counts),
+ * so that they list the receivers cell by cell. A rank past its end's count (a bug: counts, row as in
+ * pass 1, second_row 0 for one row) would overwrite or go outside its cell: it is not written but counted
+ * in *dropped, which the host checks. */
 __kernel void exact_bin_fill(int n, __global const Start *start, __global const int *slot,
-                             __global const int *offsets, __global Start *binned, __global int *index,
-                             __global volatile int *dropped)
+                             __global const int *counts, int second_row, __global const int *offsets,
+                             __global Start *binned, __global int *index, __global volatile int *dropped)
 {
     const int i = get_global_id(0);
     if (i >= n)
@@ -355,15 +404,16 @@ __kernel void exact_bin_fill(int n, __global const Start *start, __global const 
      * before they are written (with the write hint) */
     const int ahead = i + FILL_AHEAD;
     if (ahead < n && slot[ahead] >= 0) {
-        const int k = offsets[start[ahead].cell] + slot[ahead];
+        const int c = start[ahead].cell;
+        const int k = slot_place(slot[ahead], offsets[c], offsets[c + 1]);
         SC_PREFETCH(binned + k, 1);
         SC_PREFETCH(index + k, 1);
     }
     const int s = slot[i];
     if (s >= 0) {
         const Start r = start[i];
-        const int k = offsets[r.cell] + s;
-        if (k < offsets[r.cell + 1]) {
+        if ((s >> 1) < counts[(s & 1) * second_row + r.cell]) {
+            const int k = slot_place(s, offsets[r.cell], offsets[r.cell + 1]);
             binned[k] = r;
             index[k] = i;
         } else {

@@ -25,10 +25,13 @@
  *   phase 0: sums[g] = the block's total (long).
  *   phase 1: offsets[i] = sum of counts[0..i); offsets[n] = total, and sums[nblocks] = total (long).
  *            Work-item g adds up the block sums before its block itself (at most SCAN_BLOCKS of them:
- *            cheaper than a third launch). Valid when the total fits an int (host checks). */
+ *            cheaper than a third launch). Valid when the total fits an int (host checks).
+ * Element i is counts[i], or with second_row > 0 counts[i] + counts[second_row + i]: two rows of counts
+ * added as they are scanned (the exact method's receivers, counted by two owners: kernels/exact.cl). */
 __kernel void scan_blocks(__global const int *counts, int n, int block, __global long *sums,
-                          __global int *offsets, int nblocks, int phase)
+                          __global int *offsets, int nblocks, int phase, int second_row)
 {
+#define SCAN_COUNT(i) (counts[i] + (second_row ? counts[second_row + (i)] : 0))
     const int g = get_global_id(0);
     const int start = g * block;
     if (start >= n)
@@ -37,7 +40,7 @@ __kernel void scan_blocks(__global const int *counts, int n, int block, __global
     if (phase == 0) {
         long s = 0;
         for (int i = start; i < end; ++i)
-            s += counts[i];
+            s += SCAN_COUNT(i);
         sums[g] = s;
         return;
     }
@@ -47,13 +50,14 @@ __kernel void scan_blocks(__global const int *counts, int n, int block, __global
     int run = (int)before;
     for (int i = start; i < end; ++i) {
         offsets[i] = run;
-        run += counts[i];
+        run += SCAN_COUNT(i);
     }
     if (g == nblocks - 1) {
         const long total = before + sums[g];
         offsets[n] = (int)total;
         sums[nblocks] = total;
     }
+#undef SCAN_COUNT
 }
 
 #define SC_SORT_SHORT 16

@@ -133,6 +133,27 @@ def test_devices_without_doubles_match_reference(device, light_name, with_normal
         check_against_reference(mask, mesh, light, points, normals, default_eps(mesh.bounds), f"float32 input/{light_name}")
 
 
+@pytest.mark.parametrize("both_ends", [False, True], ids=["atomic", "both-ends"])
+@pytest.mark.parametrize("with_normals", [False, True], ids=["points", "normals"])
+@pytest.mark.parametrize("light_name", list(LIGHTS))
+def test_every_receiver_binning_matches_reference(device, light_name, with_normals, both_ends):
+    """Both ways of giving the receivers their slots (kernels/exact.cl pass 1: atomic_inc, a GPU's; or two
+    halves binned serially, filling the cells from both ends, a small CPU's) give the reference's mask, on
+    a receiver count of odd packets (the halves differ)."""
+    mesh, points, normals = random_scene(7, with_normals)
+    points, normals = points[:5999], None if normals is None else normals[:5999]
+    light = LIGHTS[light_name]
+    method = ExactMethod(device)
+    method._both_ends = both_ends
+    method.prepare(mesh, light, np.stack([points.min(0), points.max(0)]), default_eps(mesh.bounds))
+    mask = method.classify(points, normals)
+    truth = reference_mask(7, with_normals, light_name)[:5999]
+    if not np.array_equal(mask, truth):
+        check_against_reference(mask, mesh, light, points, normals, default_eps(mesh.bounds), f"{both_ends}/{light_name}")
+    baseline, _ = classify(mesh, light, points, normals, device=device)
+    assert np.array_equal(mask, baseline)
+
+
 def test_view_kinds_of_the_random_lights(device):
     mesh, points, _ = random_scene(7, False)
     kinds = {name: classify(mesh, light, points[:10], device=device)[1].stats["view_kind"]
@@ -157,25 +178,28 @@ def test_linked_list_overflow_gives_the_same_mask(device):
     assert np.array_equal(csr, linked)
 
 
-def test_receiver_binning_that_drops_receivers_raises(device, monkeypatch):
+@pytest.mark.parametrize("both_ends", [False, True], ids=["atomic", "both-ends"])
+def test_receiver_binning_that_drops_receivers_raises(device, monkeypatch, both_ends):
     """The receivers' fill writes only inside its cell's slots and counts what it cannot place; the host
     raises rather than return a mask with receivers never walked. Driven by cutting pass 1's counts to
-    one per cell, so that every cell holding several receivers overflows."""
+    one per cell, so that every cell holding several receivers overflows (from either end)."""
     mesh, points, normals = random_scene(7, True)
     real = type(device).kernel
+    counts_at = {"exact_bin_count": 17, "exact_bin_count_ends": 18}    # after the 17 BIN_ARGS (and per_end)
 
     def cut_counts(self, filename, name, options=()):
         kernel = real(self, filename, name, options)
-        if name != "exact_bin_count":
+        if name not in counts_at:
             return kernel
 
         def run(queue, gsize, lsize, *args):
             kernel(queue, gsize, lsize, *args)
-            counts, cells = args[17], int(args[11]) + 1     # after the 17 BIN_ARGS; brute_cell + 1 cells
-            cl.enqueue_fill_buffer(queue, counts, np.int32(1), 0, 4 * cells)
+            counts = args[counts_at[name]]
+            cl.enqueue_fill_buffer(queue, counts, np.int32(1), 0, counts.size // 4 * 4)
         return run
 
     monkeypatch.setattr(type(device), "kernel", cut_counts)
+    monkeypatch.setattr(exact_module, "bins_from_both_ends", lambda cl_device: both_ends)
     with pytest.raises(RuntimeError, match=r"exact: the receivers' binning met \d+ entries more"):
         classify(mesh, LIGHTS["point-far"], points, normals, device=device)
 

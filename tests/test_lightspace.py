@@ -211,6 +211,20 @@ def test_prefix_sum_matches_numpy(device, rng, n):
     assert np.array_equal(got, want), f"scan of {n}: first difference at {int(np.argmax(got != want))}"
 
 
+@pytest.mark.parametrize("n, second_row", [(1, 2), (2999, 3000), (700001, 700002)])
+def test_prefix_sum_of_two_rows_matches_numpy(device, rng, n, second_row):
+    """second_row: element i is counts[i] + counts[second_row + i] (two rows added as they are scanned, the
+    exact method's receivers counted from both ends), each row's entries past n left out."""
+    counts = rng.integers(0, 50, (2, second_row)).astype(np.int32)
+    views = ls.fit_views(sc.DirectionalLight((0, -1, 0)), BOUNDS, np.zeros(3), 1.0)
+    offsets = device.empty(4 * (n + 1))
+    total = ls.ListBuilder(device).prefix_sum(ls.make_grid(views, resolution=4), device.to_device(counts), n,
+                                              offsets, second_row)
+    want = np.concatenate([[0], np.cumsum(counts[:, :n].sum(0))])
+    assert total == want[-1]
+    assert np.array_equal(device.from_device(offsets, n + 1, np.int32), want)
+
+
 def test_csr_fill_past_a_cells_slots_is_counted_not_written(device, rng):
     """The fill given one slot per cell (a count too small, as a fill disagreeing with its count would
     see) writes one listed primitive per non-empty cell, nothing else and nothing past the lists' end,

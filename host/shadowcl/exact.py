@@ -154,6 +154,15 @@ def _coarse_of_fine(grid) -> np.ndarray:
     return np.concatenate(parts)
 
 
+def bins_from_both_ends(cl_device) -> bool:
+    """Whether pass 1 of the receivers' binning (kernels/exact.cl) runs as two serial halves filling the cells
+    from both ends (exact_bin_count_ends: no atomics) rather than as atomic_inc per receiver. A CPU with up
+    to 4 compute units: on this 2-core machine the pass 8.6-10.4 -> 5.0-8.2 ms; with more, two work-items
+    would leave cores idle (the cut at 4 is reasoned, not measured: atomics on 4 cores cost about what two
+    serial halves do)."""
+    return bool(cl_device.type & cl.device_type.CPU) and int(cl_device.max_compute_units) <= 4
+
+
 class ExactMethod(Method):
     """Exact shadows: light-space lists built on the device, then the receivers' walks of their cells' lists.
 
@@ -181,7 +190,8 @@ class ExactMethod(Method):
                          "heads, capacity grown and the build rerun on overflow)"),
         "initial_capacity": (None, "linked lists: nodes allocated for the first build (None: 8 per triangle); "
                                    "an overflow grows the buffer to the counted size and rebuilds"),
-        "chunk": (1 << 22, "receivers per classify launch (bounds device memory)"),
+        "chunk": (1 << 22, "receivers per classify launch (bounds device memory; at most 2 ** 29: the kernels' "
+                           "slots are ints holding twice a rank)"),
         "order": ("cells", "receivers' traversal order: 'cells' (binned by light-space cell on the device, then "
                            "BIN_LANES receivers of a cell tested together against each triangle of its list) or "
                            "'caller' (one receiver per work-item as given, no binning; faster where walks are short "
@@ -201,12 +211,13 @@ class ExactMethod(Method):
         self.test = choice("test", p["test"], TESTS)
         self.lists_kind = choice("lists", p["lists"], LISTS)
         self.initial_capacity = optional_int("initial_capacity", p["initial_capacity"], 1)
-        self.chunk = positive_int("chunk", p["chunk"])
+        self.chunk = positive_int("chunk", p["chunk"], maximum=1 << 29)
         self.order = choice("order", p["order"], ORDERS)
         self.split = flag("split", p["split"])
         self._builder = lightspace.ListBuilder(device, corners=3)
         # float64 points go to the device as they are when it has doubles (cheaper than converting here)
         self._fp64 = "cl_khr_fp64" in device.cl_device.extensions
+        self._both_ends = bins_from_both_ends(device.cl_device)
         self._prepared = False
 
     # prepare -------------------------------------------------------------------------------------------
@@ -440,30 +451,39 @@ class ExactMethod(Method):
                 queue, (n,), None, *bin_args, self._records, np.int32(self._ntris), lists_a, lists_b,
                 self.lists.fine_masks, walk_coarse, behind, out_dev)
             return dev.from_device(out_dev, n, np.uint8), int(dev.from_device(behind, 1, np.int32)[0])
-        counts = dev.scratch("exact: receiver cell counts", 4 * (brute_cell + 1))
-        cl.enqueue_fill_buffer(queue, counts, np.int32(0), 0, 4 * (brute_cell + 1))
+        rows = 2 if self._both_ends else 1
+        row = brute_cell + 2                          # a row of counts: every cell, then the non-walkers
+        counts = dev.scratch("exact: receiver cell counts", 4 * row * rows)
+        cl.enqueue_fill_buffer(queue, counts, np.int32(0), 0, 4 * row * rows)
         slot = dev.scratch("exact: receiver slots", 4 * n)
         start = dev.scratch("exact: receiver starts", 16 * n)          # (s, cell) per receiver: kernels/exact.cl Start
-        dev.kernel("exact.cl", "exact_bin_count", options)(queue, (-(-n // BIN_LANES),), None, *bin_args, counts,
-                                                           slot, out_dev, start)
+        packets = -(-n // BIN_LANES)
+        if self._both_ends:
+            dev.kernel("exact.cl", "exact_bin_count_ends", options)(
+                queue, (2,), (1,), *bin_args, np.int32(-(-packets // 2)), counts, slot, out_dev, start)
+        else:
+            dev.kernel("exact.cl", "exact_bin_count", options)(queue, (packets,), None, *bin_args, counts, slot,
+                                                               out_dev, start)
         offsets = dev.scratch("exact: receiver cell offsets", 4 * (brute_cell + 2))
-        binned_count = self._builder.prefix_sum(self.grid, counts, brute_cell + 1, offsets)
+        # The host waits for the total and for the fill's check: a kernel enqueued behind running ones ran
+        # slower on PoCL (the fill 5.7 -> 10.8 ms, the walk 7.1 -> 11-15, default scene), not faster.
+        second_row = row if self._both_ends else 0
+        binned_count = self._builder.prefix_sum(self.grid, counts, brute_cell + 1, offsets, second_row)
         if binned_count:
             by_cell = dev.scratch("exact: receiver starts by cell", 16 * binned_count)
             index = dev.scratch("exact: receiver indices by cell", 4 * binned_count)
             dropped = dev.scratch("exact: dropped receivers", 4)
             cl.enqueue_fill_buffer(queue, dropped, np.int32(0), 0, 4)
-            dev.kernel("exact.cl", "exact_bin_fill", options)(queue, (n,), None, np.int32(n), start, slot, offsets,
-                                                              by_cell, index, dropped)
+            dev.kernel("exact.cl", "exact_bin_fill", options)(queue, (n,), None, np.int32(n), start, slot, counts,
+                                                              np.int32(second_row), offsets, by_cell, index, dropped)
             check_filled(dev, dropped, "exact: the receivers' binning")
-            packets = -(-binned_count // BIN_LANES)
             dev.kernel("exact.cl", "exact_classify", options)(
-                queue, (packets,), None, by_cell, index, np.int32(binned_count), self.lists.params, self._records,
-                np.int32(self._ntris), np.int32(brute_cell), lists_a, lists_b, self.lists.fine_masks, *light,
-                np.float32(self.eps), walk_coarse, np.int32(n), out_dev)
-        brute_start = np.empty(1, np.int32)
-        cl.enqueue_copy(queue, brute_start, offsets, src_offset=4 * brute_cell)
-        return dev.from_device(out_dev, n, np.uint8), binned_count - int(brute_start[0])
+                queue, (-(-binned_count // BIN_LANES),), None, by_cell, index, np.int32(binned_count),
+                self.lists.params, self._records, np.int32(self._ntris), np.int32(brute_cell), lists_a, lists_b,
+                self.lists.fine_masks, *light, np.float32(self.eps), walk_coarse, np.int32(n), out_dev)
+        brute = np.empty(2, np.int32)                    # the brute cell's bounds
+        cl.enqueue_copy(queue, brute, offsets, src_offset=4 * brute_cell)
+        return dev.from_device(out_dev, n, np.uint8), int(brute[1] - brute[0])
 
     # statistics ----------------------------------------------------------------------------------------
     def _list_lengths(self) -> np.ndarray:

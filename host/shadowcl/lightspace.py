@@ -470,9 +470,9 @@ class ListBuilder:
         lists.params = params
         return lists
 
-    def prefix_sum(self, grid: Grid, counts: cl.Buffer, n: int, offsets: cl.Buffer) -> int:
+    def prefix_sum(self, grid: Grid, counts: cl.Buffer, n: int, offsets: cl.Buffer, second_row: int = 0) -> int:
         """offsets = exclusive prefix sum of counts (n + 1 entries); returns the total (:func:`lists.prefix_sum`)."""
-        return lists.prefix_sum(self.device, lambda name: self._kernel(grid, name), counts, n, offsets)
+        return lists.prefix_sum(self.device, lambda name: self._kernel(grid, name), counts, n, offsets, second_row)
 
 
 def point_cells(device, grid: Grid, points_rel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

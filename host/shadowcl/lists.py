@@ -17,8 +17,12 @@ import pyopencl as cl
 SCAN_BLOCKS = 512           # work-items of the prefix sum
 
 
-def prefix_sum(device, kernel: Callable[[str], cl.Kernel], counts: cl.Buffer, n: int, offsets: cl.Buffer) -> int:
+def prefix_sum(device, kernel: Callable[[str], cl.Kernel], counts: cl.Buffer, n: int, offsets: cl.Buffer,
+               second_row: int = 0) -> int:
     """offsets = exclusive prefix sum of the ``n`` int ``counts`` (n + 1 entries); returns the total.
+
+    With ``second_row`` > 0, ``counts`` holds two rows and element i is counts[i] + counts[second_row + i]
+    (added as they are scanned, in place of a kernel adding them: kernels/lists.h).
 
     ``kernel(name)`` gives the kernel ``name`` of a program that includes ``lists.h``. Two launches of
     one kernel (one compile) on SCAN_BLOCKS work-items, each scanning a block serially (no local memory
@@ -36,7 +40,7 @@ def prefix_sum(device, kernel: Callable[[str], cl.Kernel], counts: cl.Buffer, n:
     scan = kernel("scan_blocks")
     for phase in (0, 1):          # the blocks' sums, then the offsets
         scan(queue, (nblocks,), None, counts, np.int32(n), np.int32(block), sums, offsets, np.int32(nblocks),
-             np.int32(phase))
+             np.int32(phase), np.int32(second_row))
     total = np.empty(1, np.int64)
     cl.enqueue_copy(queue, total, sums, src_offset=8 * nblocks)
     return int(total[0])
