@@ -29,14 +29,12 @@ receivers on the ground + 200 k on the model, random order, PoCL on 2 cores; ran
 - Receivers are binned by cell on the device, then walked ``BIN_LANES`` (8) at a time (``order="cells"``,
   kernels/exact.cl): each triangle of a cell's list is loaded once and tested against all the packet's
   lanes in OpenCL vectors. Against the per-receiver walk in the caller's order (``order="caller"``,
-  kept), one-shot ``shadow_mask`` at 1.2 M random-order receivers, median of 6 (2026-12-01; this VM's
-  run-to-run noise is 10-20 %), caller -> cells in ms, with / without normals: bunny 140 -> 125 /
-  206 -> 158, ogre 151 -> 173 / 179 -> 174, teapot 87 -> 98 / 111 -> 96, default 57 -> 92 / 101 -> 104,
-  light_inside 145 -> 97 / 302 -> 162; 1,479 -> 1,279 ms summed. Binning costs 35-50 ms (count and
-  fill passes, most of it the scattered records), the sorted walk saves 30-150: it wins where walks are
-  long (light_inside: 1.5-1.9x) and loses where they are short and end early (default with normals:
-  1.6x slower). No cheap predictor was found (the lists' mean walk for evenly spread receivers ranks
-  these scenes wrongly), so 'cells' is the default by the sum and the worst case. Lanes: 8 against 1
+  kept), one-shot ``shadow_mask`` at 1.2 M random-order receivers, alternating in one process, medians
+  of 9 (2026-12-04), caller -> cells in ms, with / without normals: default 50.5 -> 30.5 / 80.3 -> 43.4,
+  light_inside 65.5 -> 32.9 / 121.0 -> 44.4, bunny 91.3 -> 51.9 / 94.4 -> 56.7, ogre 124.5 -> 81.2 /
+  129.1 -> 83.5, teapot 75.9 -> 37.2 / 71.8 -> 37.4, city_block 56.6 -> 34.1 / 72.3 -> 36.5: 1.5-2.7x,
+  the same masks. (On 2026-12-01, with the binning passes of then, before the later changes below,
+  cells lost on default with normals, 57 -> 92 ms, and won by the sum.) Lanes: 8 against 1
   on light_inside 95 / 169 ms with normals, 4 lanes 108; 16 crashes PoCL's LLVM 14 ("Do not know how
   to scalarize"), double8 arithmetic miscompiled there (ray_triangle.h's refinement is per lane).
 - Binning without recomputing: pass 1 starts ``BIN_LANES`` receivers per work-item (their rows read
