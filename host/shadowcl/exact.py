@@ -86,7 +86,13 @@ receivers on the ground + 200 k on the model, random order, PoCL on 2 cores; ran
   makes the one-shot ``shadow_mask`` slower on 4 (teapot 81 -> 102 ms, default 53 -> 119, contact 58 ->
   87, far_offset 53 -> 115) and 8 % faster on light_inside (164 -> 151): its build (five more list
   builds and the host's dedup, ~60 ms) costs more than one query saves. A caller who prepares once
-  and queries many times with long coarse lists (light_inside: query 161 -> 71 ms) passes split=True.
+  and queries many times with long coarse lists (light_inside: query 161 -> 71 ms) passed split=True.
+  Measured again 2026-12-04 (light_inside, 1.2 M receivers, one structure of each, queries alternating,
+  medians of 9, masks identical): the walk's bound halves (23.6 -> 10.8 entries), but the query is
+  only 27.9 -> 26.4 ms with normals and 42.6 -> 41.9 without, for a prepare of 4.2 -> 57.3 ms. Since
+  2026-12-02 the coarse entries carry their fine cells (lightspace.cl ls_fine_mask), and a packet skips
+  the entries none of its fine cells needs: most of what the pieces removed. Kept for a structure
+  queried very many times; the one-shot call and the bench leave it off.
 
 Where the time goes, per stage (``stats``: upload, views, lists, records; classify), and how fast the
 public call is against Embree: bench/results (``python bench/run.py``; README's figures are generated
@@ -194,13 +200,13 @@ class ExactMethod(Method):
                            "slots are ints holding twice a rank)"),
         "order": ("cells", "receivers' traversal order: 'cells' (binned by light-space cell on the device, then "
                            "BIN_LANES receivers of a cell tested together against each triangle of its list) or "
-                           "'caller' (one receiver per work-item as given, no binning; faster where walks are short "
-                           "and many receivers are shadowed early: see the module docstring)"),
+                           "'caller' (one receiver per work-item as given, no binning; 1.5-2.7x slower on every "
+                           "bench scene: see the module docstring)"),
         "split": (False, "csr lists: when the coarse lists are long (more than SPLIT_PER_COARSE_CELL entries "
                          "per coarse cell: walls round a light inside a room), bin the triangles listed there "
                          "by pieces small enough for the fine grid; the walk still tests the whole triangle. "
-                         "Pays when one prepared structure answers many queries (its build costs more than "
-                         "one query saves: see the module docstring)"),
+                         "Pays only when one prepared structure answers very many queries (its build costs "
+                         "~50 ms more to save 2-5 % of a query on light_inside: see the module docstring)"),
     }
 
     def __init__(self, device, **params):
