@@ -122,3 +122,35 @@ def test_input_view_shares_host_memory_only_where_the_device_does(device, monkey
     assert buffers[False].flags & cl.mem_flags.COPY_HOST_PTR and not buffers[False].flags & cl.mem_flags.USE_HOST_PTR
     for buffer in buffers.values():
         assert np.array_equal(device.from_device(buffer, (4, 3), np.float64), array)
+
+
+LANE_ANY_KERNEL = """
+#include "vecmath.h"
+__kernel void lane_any(__global const int *masks, __global int *out)
+{
+    const int g = get_global_id(0);
+    int m[LANES];
+    for (int j = 0; j < LANES; ++j)
+        m[j] = masks[LANES * g + j];
+    const lint mask = LANE_LOAD(int, m);
+    out[2 * g] = LANE_ANY(mask);
+    out[2 * g + 1] = LANE_ANY_SWIZZLED(mask);
+}
+"""
+
+
+@pytest.mark.parametrize("lanes", [4, 8])
+def test_lane_any_matches_numpy_either_way(tmp_path, rng, lanes):
+    """vecmath.h's LANE_ANY (a compiler builtin where there is one) and its swizzled fallback, on every
+    single-lane mask, none and all, and random ones."""
+    (tmp_path / "lane_any.cl").write_text(LANE_ANY_KERNEL)
+    (tmp_path / "vecmath.h").write_text((device_module.KERNEL_DIR / "vecmath.h").read_text())
+    dev = sc.Device(kernel_dir=tmp_path)
+    masks = np.concatenate([np.zeros((1, lanes)), np.eye(lanes), np.ones((1, lanes)),
+                            rng.random((200, lanes)) < 0.2]).astype(np.int32) * -1
+    out = dev.empty(8 * len(masks))
+    dev.kernel("lane_any.cl", "lane_any", (f"-DLANES={lanes}",))(dev.queue, (len(masks),), None,
+                                                                 dev.to_device(masks), out)
+    got = dev.from_device(out, (len(masks), 2), np.int32) != 0
+    expected = masks.any(axis=1)
+    assert np.array_equal(got[:, 0], expected) and np.array_equal(got[:, 1], expected)
