@@ -59,6 +59,10 @@ class Frame:
     def points(self, positions: np.ndarray) -> np.ndarray:
         return (np.asarray(positions, dtype=np.float64) - self.centre) / self.scale
 
+    def world_points(self, positions: np.ndarray) -> np.ndarray:
+        """Working coordinates back to the world (float64): the inverse of :meth:`points`."""
+        return np.asarray(positions, dtype=np.float64) * self.scale + self.centre
+
     def length(self, distance: float) -> float:
         return float(distance) / self.scale
 

@@ -22,6 +22,10 @@ from .lights import PointLight, check_light
 from .methods import as_mesh, method_class, occluders, resolve_eps, with_receiver_count, with_receivers
 from .points import BOUNDS_SLACK, Points, check_points
 
+NEAR = 1.0   # occluder box diagonals round the occluders' box: a bounded method's structure covers them,
+             # and receivers beyond them are answered from where their segment enters the box (_answer_far)
+CLIP_PAD = 2.0 ** -10   # of the occluders' diagonal, outside their box, where a far receiver's segment is clipped
+
 
 class Shadows:
     """One method prepared for one scene and light: query it with :meth:`mask` and :meth:`visibility`.
@@ -78,8 +82,11 @@ class Shadows:
         check_clearance(self._mesh, self.light, self._instance.min_light_clearance, self.method)
         start = time.perf_counter()
         frame = self._frame
-        self._fitted_box, self._refuse_beyond = self._fit(self.light)
+        self._fitted_box = self._fit(self.light)
         self._reach = union(self._mesh.bounds, self._fitted_box)   # the box the light is judged distant for
+        # Receivers outside the fitted box go to a second structure where the method's own is not meant
+        # for them: a bounded method's, or one given the point light as directional for this box.
+        self._split = self._instance.bounded or is_distant(self.light, self._reach, self._instance.point_light_reach)
         self._frame_light = self._method_light(self._reach)
         self._true_light = frame.light(self.light, self._reach, limit=np.inf)   # never substituted
         self._instance.prepare(self._occluders, self._frame_light, frame.points(self._fitted_box), frame.length(self.eps))
@@ -103,40 +110,60 @@ class Shadows:
     def _query(self, kind: str, points, normals) -> np.ndarray:
         start = time.perf_counter()
         receivers = check_points(points, normals)
-        given_checked = receivers is points
-        split = self._instance.bounded or self._refuse_beyond
-        if not split:
-            self._check_reach(receivers)
-        outside = self._outside_bounds(receivers)
-        world, receivers = receivers, self._framed(receivers, given_checked)
+        framed = self._framed(receivers, receivers is points)
+        far = self._far(receivers)
         checked = time.perf_counter()
-        if split and len(outside):
-            inside = np.ones(len(receivers), dtype=bool)
-            inside[outside] = False
-            beyond = receivers.subset(outside)
+        if len(far):
+            near = np.ones(len(receivers), dtype=bool)
+            near[far] = False
             answer = np.empty(len(receivers), dtype=bool if kind == "classify" else np.float32)
-            answer[inside] = getattr(self._instance, kind)(receivers.subset(inside))
-            # Beyond: a segment that misses the occluders' box is lit, unless its normal faces away.
-            reaching = self._reaching(beyond)
-            answer[outside] = beyond.facing_away(self._true_light) if kind == "classify" \
-                else (~beyond.facing_away(self._true_light)).astype(np.float32)
-            if np.any(reaching) and self._refuse_beyond:
-                first = int(outside[np.argmax(reaching)])
-                raise ValueError(
-                    f"points: {int(reaching.sum())} receiver(s) (first at index {first}: {world.positions[first].tolist()}) "
-                    f"lie so far from the occluders that the point light, {self.method}'s arithmetic cannot resolve "
-                    f"from them, is not parallel for them; use a DirectionalLight or nearer receivers")
-            if np.any(reaching):
-                candidates = beyond.subset(reaching)
-                far = world.subset(outside[reaching]).bounds
-                answer[outside[reaching]] = getattr(self._fitted_to(candidates, far), kind)(candidates)
+            answer[near], outside = self._answer(kind, receivers.subset(near), framed.subset(near))
+            answer[far], outside_far = self._answer_far(kind, framed.subset(far))
+            outside += outside_far
         else:
-            answer = getattr(self._instance, kind)(receivers)
+            answer, outside = self._answer(kind, receivers, framed)
         if not self._instance.answers_at_the_light:
-            answer[self._at_the_light(receivers)] = True if kind == "visibility" else False
+            answer[self._at_the_light(framed)] = True if kind == "visibility" else False
         self._check_s, self._classify_s = checked - start, time.perf_counter() - start
-        self._outside, self._receivers = len(outside), len(receivers)
+        self._outside, self._receivers = outside, len(receivers)
         return answer
+
+    def _answer(self, kind: str, world: Points, framed: Points) -> tuple[np.ndarray, int]:
+        """The method's answers for receivers near the occluders (``world``, the same ``framed``), and how
+        many lay outside the fitted box."""
+        outside = self._outside_bounds(world)
+        if not (self._split and len(outside)):
+            return getattr(self._instance, kind)(framed), len(outside)
+        inside = np.ones(len(framed), dtype=bool)
+        inside[outside] = False
+        beyond = framed.subset(outside)
+        answer = np.empty(len(framed), dtype=bool if kind == "classify" else np.float32)
+        answer[inside] = getattr(self._instance, kind)(framed.subset(inside))
+        # Beyond: a segment that misses the occluders' box is lit, unless its normal faces away.
+        reaching = self._entry(beyond, self._frame.length(1e-6 * self._frame.extent))[1]
+        answer[outside] = beyond.facing_away(self._true_light) if kind == "classify" \
+            else (~beyond.facing_away(self._true_light)).astype(np.float32)
+        if np.any(reaching):
+            candidates = beyond.subset(reaching)
+            far = world.subset(outside[reaching]).bounds
+            answer[outside[reaching]] = getattr(self._fitted_to(candidates, far), kind)(candidates)
+        return answer, len(outside)
+
+    def _answer_far(self, kind: str, framed: Points) -> tuple[np.ndarray, int]:
+        """The answers for (framed) receivers beyond :data:`NEAR` of the occluders: lit where the tested segment misses the occluders' box, in shadow where the normal
+        faces away, else the method's answer for the segment's part from where it enters the box padded
+        by :meth:`_clip_pad` (the same hits: nothing lies outside the box, and its eps stays outside).
+        The float32 methods then start near the occluders: from 3e4 scene sizes on, a start's rounding
+        and the sheared coordinates relative to it had lost the triangles' size (docs/known-defects.md)."""
+        facing = framed.facing_away(self._true_light)
+        answer = facing if kind == "classify" else (~facing).astype(np.float32)
+        starts, reaching = self._entry(framed, self._clip_pad())
+        clipped = np.flatnonzero(reaching & ~facing)
+        if len(clipped) == 0:
+            return answer, 0
+        world = check_points(self._frame.world_points(starts[clipped]))
+        answer[clipped], outside = self._answer(kind, world, self._frame.receivers(world))
+        return answer, outside
 
     def _framed(self, receivers: Points, keep: bool) -> Points:
         """``receivers`` in the frame (which does not change with the light). ``keep``: the caller passed
@@ -158,26 +185,33 @@ class Shadows:
         return self._instance.classify_view(framed, dataclasses.replace(zbuffer, view=framed),
                                             dataclasses.replace(seen, points=frame.points(seen.points)))
 
-    def _fit(self, light) -> tuple[np.ndarray, bool]:
-        """The (world) box the structure is fitted to, and whether receivers beyond it that the occluders
-        may shadow must be refused: a point light beyond the method's ``point_light_reach`` from the
-        occluders, which it cannot resolve, is given to it as directional (:mod:`shadowcl.frame`) only
-        for receivers near enough for that to hold; beyond them, a segment missing the occluders' box
-        is lit, any other has no right answer from this method."""
+    def _fit(self, light) -> np.ndarray:
+        """The (world) box the structure is fitted to. A point light beyond the method's
+        ``point_light_reach`` from the occluders, which it cannot resolve, is given to it as directional
+        (:mod:`shadowcl.frame`) only for receivers near enough for that to hold; the others get a second
+        structure, fitted to them, for which the light is within reach. The near part is the receivers' box
+        cut per axis to a margin round the occluders' box, joined to the box where far receivers'
+        segments are clipped (:meth:`_answer_far`); while the light is not distant for it, the margin
+        of its longest axis is halved (a receiver plane just under the occluders stays in, its wide
+        sides are cut)."""
         occluders, limit = self._mesh.bounds, self._instance.point_light_reach
         box = near_box(self.bounds, occluders) if self._instance.bounded else self.bounds
         if not is_distant(light, occluders, limit) or is_distant(light, union(occluders, box), limit):
-            return box, False
+            return box
+        pad = 2.0 * self.eps + CLIP_PAD * self._frame.extent
+        clipped = occluders + np.array([[-1.0], [1.0]]) * pad
         centre = 0.5 * (occluders[0] + occluders[1])
-        half = np.linalg.norm(light.position - centre) / limit
-        while half > 0:
-            cut = np.stack([np.maximum(box[0], centre - half), np.minimum(box[1], centre + half)])
-            if not np.all(cut[0] <= cut[1]):
-                return occluders, True
-            if is_distant(light, union(occluders, cut), limit):
-                return cut, True
-            half *= 0.5
-        return occluders, True
+        margin = np.full(3, np.linalg.norm(light.position - centre) / limit)
+        while True:
+            cut = np.stack([np.maximum(box[0], occluders[0] - margin), np.minimum(box[1], occluders[1] + margin)])
+            fitted = union(clipped, cut) if np.all(cut[0] <= cut[1]) else clipped
+            if is_distant(light, fitted, limit):
+                return fitted
+            wider = np.ptp(fitted, axis=0) - np.ptp(clipped, axis=0)
+            if not np.any((wider > 0) & (margin > pad)):
+                break
+            margin[np.argmax(np.where(margin > pad, wider, -np.inf))] *= 0.5
+        return clipped if is_distant(light, clipped, limit) else occluders
 
     def _method_light(self, reach: np.ndarray):
         """The light as the method gets it (:meth:`shadowcl.frame.Frame.light`) for receivers in ``reach``."""
@@ -204,11 +238,11 @@ class Shadows:
         short = np.linalg.norm(light.position - start, axis=1) <= eps
         return near[short & ~candidates.facing_away(light)]
 
-    def _reaching(self, receivers: Points) -> np.ndarray:
-        """bool (N,): the tested segment (ray) of each framed receiver meets the occluders' box (slab test
-        in float64, the box widened by 1e-6 of its size)."""
-        box = self._frame.points(self._mesh.bounds)
-        box = box + np.array([[-1.0], [1.0]]) * 1e-6 * max(float(np.linalg.norm(box[1] - box[0])), 1e-300)
+    def _entry(self, receivers: Points, pad: float) -> tuple[np.ndarray, np.ndarray]:
+        """Where the tested segment (ray) of each framed receiver enters the occluders' box widened by
+        ``pad`` (frame units), (N, 3), and bool (N,) whether it meets that box at all (slab test in
+        float64)."""
+        box = self._frame.points(self._mesh.bounds) + np.array([[-1.0], [1.0]]) * pad
         start = receivers.positions
         if receivers.normals is not None:
             start = start + self._frame.length(self.eps) * receivers.unit_normals()
@@ -225,10 +259,22 @@ class Shadows:
         outside_slab = parallel & ((start < box[0]) | (start > box[1]))
         enter = np.fmax(np.max(np.where(parallel, -np.inf, low), axis=1), 0.0)
         leave = np.fmin(np.min(np.where(parallel, np.inf, high), axis=1), end)
-        return (enter <= leave) & ~np.any(outside_slab, axis=1)
+        return start + enter[:, None] * direction, (enter <= leave) & ~np.any(outside_slab, axis=1)
+
+    def _clip_pad(self) -> float:
+        """How far outside the occluders' box a far receiver's segment is clipped (frame units): more than
+        eps, so that the clipped start's eps never reaches a triangle, plus :data:`CLIP_PAD` of the box."""
+        return self._frame.length(2.0 * self.eps + CLIP_PAD * self._frame.extent)
+
+    def _far(self, receivers: Points) -> np.ndarray:
+        """Indices of the (world) receivers more than :data:`NEAR` occluder diagonals (plus 3 eps) outside
+        the occluders' box: their starts lie outside the box widened by :meth:`_clip_pad`."""
+        margin = NEAR * self._frame.extent + 3.0 * self.eps
+        return outside_box(receivers, self._mesh.bounds[0] - margin, self._mesh.bounds[1] + margin)
 
     def _check_reach(self, receivers: Points) -> None:
-        """A point light used as directional for ``bounds`` must stay distant for these receivers too."""
+        """A point light used as directional for ``bounds`` must stay distant for these receivers too (the
+        camera's receivers of an image-space method, which has one structure: no second one for them)."""
         limit = self._instance.point_light_reach
         if len(receivers) and is_distant(self.light, self._reach, limit) \
                 and not is_distant(self.light, union(self._reach, receivers.bounds), limit):
@@ -237,15 +283,10 @@ class Shadows:
                              f"prepare with bounds covering them")
 
     def _outside_bounds(self, receivers: Points) -> np.ndarray:
-        """Indices of the receivers outside the box the structure is fitted to (with :data:`BOUNDS_SLACK`);
-        cheap when none is."""
+        """Indices of the receivers outside the box the structure is fitted to (with :data:`BOUNDS_SLACK`)."""
         box = self._fitted_box
         slack = BOUNDS_SLACK * max(bounds_diagonal(box), np.finfo(np.float32).tiny)
-        low, high = box[0] - slack, box[1] + slack
-        if len(receivers) == 0 or (np.all(receivers.bounds[0] >= low) and np.all(receivers.bounds[1] <= high)):
-            return np.zeros(0, dtype=np.int64)
-        p = receivers.positions
-        return np.flatnonzero(np.any((p < low) | (p > high), axis=1))
+        return outside_box(receivers, box[0] - slack, box[1] + slack)
 
     def _fitted_to(self, receivers: Points, world_box: np.ndarray):
         """A second instance of the method, prepared for the box of (framed) ``receivers`` (outside the
@@ -270,7 +311,12 @@ class Shadows:
                 **{k: v for k, v in own.items() if k not in ("prepare_s", "classify_s", "receivers")}}
 
 
-NEAR = 1.0   # occluder box diagonals round the occluders' box that a bounded method's structure covers
+def outside_box(receivers: Points, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+    """Indices of ``receivers`` outside the box (``low``, ``high``); cheap (their bounds) when none is."""
+    if len(receivers) == 0 or (np.all(receivers.bounds[0] >= low) and np.all(receivers.bounds[1] <= high)):
+        return np.zeros(0, dtype=np.int64)
+    p = receivers.positions
+    return np.flatnonzero(np.any((p < low) | (p > high), axis=1))
 
 
 def near_box(bounds: np.ndarray, occluders: np.ndarray) -> np.ndarray:
