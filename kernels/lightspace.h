@@ -2,7 +2,7 @@
  * and every method that looks a receiver's cell up (exact.cl).
  *
  * A view is VIEW_FLOATS floats (built by host/shadowcl/lightspace.py; ints stored as their bits):
- *     [ 0.. 3] ex ey ez _            the eye (light) or zero
+ *     [ 0.. 3] ex ey ez _            the anchor: the cube's eye (the light), else zero
  *     [ 4.. 7] Mx0 Mx1 Mx2 cx        X row
  *     [ 8..11] My0 My1 My2 cy        Y row
  *     [12..15] Mw0 Mw1 Mw2 cw        W row
@@ -14,7 +14,9 @@
  * and lies in fine cell (i, j) = (floor(X/W), floor(Y/W)) of the view's nx x ny grid (numbered from
  * base0) and in coarse cell (i >> LS_COARSE_SHIFT, j >> LS_COARSE_SHIFT) of its nx1 x ny1 grid
  * (numbered from base1). Orthographic views have Mw = 0, cw = 1 (W = 1); perspective views have
- * e = the light and W = the distance along the view axis.
+ * W = the distance along the view axis, with e = the light for the cube's six and e = 0 for a single
+ * view, whose eye (far, for a distant light) is in the constant column, rounded once from float64:
+ * d = v - light in float32 would lose ulp(|light|) of every point (host/shadowcl/lightspace.py).
  *
  * Two levels: a primitive with more candidate cells than a coarse cell holds (LS_COARSE^2: a ground
  * plane, a wall) is listed in the coarse grid only, so it costs a few entries instead of thousands; a
@@ -100,7 +102,7 @@ INLINE lint ls_point_view(__constant const float *views, lfloat px, lfloat py, l
  * X = Mx[a] d[a] + Mx[a+1] d[a+1] is the whole row's sum to the bit (its other terms are zeros). */
 INLINE lint ls_point_cells(__constant const float *views, lfloat px, lfloat py, lfloat pz, lfloat *w, lint *coarse)
 {
-    const lfloat dx = px - views[0], dy = py - views[1], dz = pz - views[2];    /* the eye: one for all views */
+    const lfloat dx = px - views[0], dy = py - views[1], dz = pz - views[2];    /* the anchor: one for all views */
     lint nx = (lint)VIEW_NX(views), ny = (lint)VIEW_NY(views), base0 = (lint)VIEW_BASE0(views);
     lint base1 = (lint)VIEW_BASE1(views), nx1 = (lint)VIEW_NX1(views);
 #if NVIEWS == 6

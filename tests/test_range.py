@@ -191,6 +191,26 @@ def test_far_point_light_and_a_wide_receiver_grid(method):
     assert truth[0] and truth.sum() < 10
 
 
+def test_point_light_thousands_of_sizes_away_on_fine_grids():
+    """A point light 300 .. 1.6e4 scene sizes away (within exact's reach) and receivers 1-5 units behind
+    a 5120-triangle sphere, on grids of 256 to 4096 cells a side: right. The views' rows once acted on
+    p - light in float32, which rounds by ulp(|light|): at 2.8e3 sizes that moved points by several
+    fine cells, and a receiver shadowed 3.7e-4 sizes inside a triangle lost it from its fine cell."""
+    import trimesh
+    sphere = trimesh.creation.icosphere(4, radius=1.0)
+    mesh = sc.Mesh(sphere.vertices + [5.0, -3.0, 2.0], sphere.faces)
+    rng = np.random.default_rng(7)
+    towards = np.array([0.31, 0.1, 0.95]) / np.linalg.norm([0.31, 0.1, 0.95])
+    for sizes in (3e2, 2.8e3, 1.6e4):
+        light = sc.PointLight(mesh.bounds.mean(0) + towards * sizes * 3.46)
+        points = mesh.bounds.mean(0) - towards * rng.uniform(1.0, 5.0, (400, 1)) + rng.uniform(-1.2, 1.2, (400, 3))
+        for resolution in (256, 2048, 4096):
+            mask = sc.shadow_mask(mesh, light, points, resolution=resolution)
+            truth, wrong = wrong_receivers("exact", mesh, light, points, mask, None, None)
+            assert len(wrong) == 0, f"{sizes:g} sizes, {resolution}: {len(wrong)} wrong, e.g. {wrong[:5]}"
+            assert 50 < truth.sum() < 390
+
+
 def test_receivers_beyond_the_range_are_refused_by_index(scene):
     v, f, points, _ = scene
     far = points.copy()

@@ -312,10 +312,19 @@ def make_grid(views: LightViews, cells: int | None = None, resolution: int | Non
     right, up, forward = views.axes[:, 0], views.axes[:, 1], views.axes[:, 2]
     rows = np.zeros((V, 16))
     if views.perspective:
-        rows[:, 0:3] = views.eye
+        # The rows act on p - anchor. A single view's anchor is the local origin (near the scene), its
+        # eye folded into the constant column in float64: p - eye in float32 would round by ulp(|eye|),
+        # and for a light 3e3 scene sizes away that moved points by several cells of a fine grid (a
+        # shadowing triangle missing from a receiver's fine cell: docs/known-defects.md). The cube's
+        # anchor is its eye (inside the scene), which ls_point_view needs, with no constant column.
+        anchor = views.eye if views.kind == "cube" else np.zeros(3)
+        rows[:, 0:3] = anchor
         rows[:, 4:7] = sx[:, None] * (right - u0[:, None] * forward)
         rows[:, 8:11] = sy[:, None] * (up - v0[:, None] * forward)
         rows[:, 12:15] = forward
+        offset = anchor - views.eye
+        for column, block in ((7, rows[:, 4:7]), (11, rows[:, 8:11]), (15, rows[:, 12:15])):
+            rows[:, column] = np.einsum("vk,k->v", block, offset)
     else:
         rows[:, 4:7], rows[:, 7] = sx[:, None] * right, -sx * u0
         rows[:, 8:11], rows[:, 11] = sy[:, None] * up, -sy * v0
