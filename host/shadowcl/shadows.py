@@ -25,6 +25,7 @@ from .points import BOUNDS_SLACK, Points, check_points
 NEAR = 1.0   # occluder box diagonals round the occluders' box: a bounded method's structure covers them,
              # and receivers beyond them are answered from where their segment enters the box (_answer_far)
 CLIP_PAD = 2.0 ** -10   # of the occluders' diagonal, outside their box, where a far receiver's segment is clipped
+ANSWER_DTYPES = {"classify": bool, "visibility": np.float32}   # of Shadows.mask and Shadows.visibility
 
 
 class Shadows:
@@ -116,7 +117,7 @@ class Shadows:
         if len(far):
             near = np.ones(len(receivers), dtype=bool)
             near[far] = False
-            answer = np.empty(len(receivers), dtype=bool if kind == "classify" else np.float32)
+            answer = np.empty(len(receivers), dtype=ANSWER_DTYPES[kind])
             answer[near], outside = self._answer(kind, receivers.subset(near), framed.subset(near))
             answer[far], outside_far = self._answer_far(kind, framed.subset(far))
             outside += outside_far
@@ -137,12 +138,11 @@ class Shadows:
         inside = np.ones(len(framed), dtype=bool)
         inside[outside] = False
         beyond = framed.subset(outside)
-        answer = np.empty(len(framed), dtype=bool if kind == "classify" else np.float32)
+        answer = np.empty(len(framed), dtype=ANSWER_DTYPES[kind])
         answer[inside] = getattr(self._instance, kind)(framed.subset(inside))
         # Beyond: a segment that misses the occluders' box is lit, unless its normal faces away.
         reaching = self._entry(beyond, self._frame.length(1e-6 * self._frame.extent))[1]
-        answer[outside] = beyond.facing_away(self._true_light) if kind == "classify" \
-            else (~beyond.facing_away(self._true_light)).astype(np.float32)
+        answer[outside] = self._unreached(kind, beyond.facing_away(self._true_light))
         if np.any(reaching):
             candidates = beyond.subset(reaching)
             far = world.subset(outside[reaching]).bounds
@@ -150,20 +150,26 @@ class Shadows:
         return answer, len(outside)
 
     def _answer_far(self, kind: str, framed: Points) -> tuple[np.ndarray, int]:
-        """The answers for (framed) receivers beyond :data:`NEAR` of the occluders: lit where the tested segment misses the occluders' box, in shadow where the normal
-        faces away, else the method's answer for the segment's part from where it enters the box padded
+        """The answers for (framed) receivers beyond :data:`NEAR` of the occluders: lit where the tested
+        segment misses the occluders' box, in shadow where the normal faces away, else the method's answer for the segment's part from where it enters the box padded
         by :meth:`_clip_pad` (the same hits: nothing lies outside the box, and its eps stays outside).
         The float32 methods then start near the occluders: from 3e4 scene sizes on, a start's rounding
         and the sheared coordinates relative to it had lost the triangles' size (docs/known-defects.md)."""
         facing = framed.facing_away(self._true_light)
-        answer = facing if kind == "classify" else (~facing).astype(np.float32)
-        starts, reaching = self._entry(framed, self._clip_pad())
+        answer = self._unreached(kind, facing)
+        starts, reaching = self._entry(framed, self._frame.length(self._clip_pad()))
         clipped = np.flatnonzero(reaching & ~facing)
         if len(clipped) == 0:
             return answer, 0
+        # back to the world: _answer judges the fitted box (world) as for any receivers
         world = check_points(self._frame.world_points(starts[clipped]))
         answer[clipped], outside = self._answer(kind, world, self._frame.receivers(world))
         return answer, outside
+
+    @staticmethod
+    def _unreached(kind: str, facing: np.ndarray) -> np.ndarray:
+        """The answers of receivers whose segment meets no occluder: in shadow only where ``facing`` away."""
+        return facing if kind == "classify" else (~facing).astype(np.float32)
 
     def _framed(self, receivers: Points, keep: bool) -> Points:
         """``receivers`` in the frame (which does not change with the light). ``keep``: the caller passed
@@ -198,7 +204,7 @@ class Shadows:
         box = near_box(self.bounds, occluders) if self._instance.bounded else self.bounds
         if not is_distant(light, occluders, limit) or is_distant(light, union(occluders, box), limit):
             return box
-        pad = 2.0 * self.eps + CLIP_PAD * self._frame.extent
+        pad = self._clip_pad()
         clipped = occluders + np.array([[-1.0], [1.0]]) * pad
         centre = 0.5 * (occluders[0] + occluders[1])
         margin = np.full(3, np.linalg.norm(light.position - centre) / limit)
@@ -262,9 +268,9 @@ class Shadows:
         return start + enter[:, None] * direction, (enter <= leave) & ~np.any(outside_slab, axis=1)
 
     def _clip_pad(self) -> float:
-        """How far outside the occluders' box a far receiver's segment is clipped (frame units): more than
+        """How far outside the occluders' box a far receiver's segment is clipped (world units): more than
         eps, so that the clipped start's eps never reaches a triangle, plus :data:`CLIP_PAD` of the box."""
-        return self._frame.length(2.0 * self.eps + CLIP_PAD * self._frame.extent)
+        return 2.0 * self.eps + CLIP_PAD * self._frame.extent
 
     def _far(self, receivers: Points) -> np.ndarray:
         """Indices of the (world) receivers more than :data:`NEAR` occluder diagonals (plus 3 eps) outside
