@@ -215,7 +215,13 @@ NOINLINE int ls_project(__global const float *prims, int p, __constant const flo
         const float qy1 = (P->j1 == ny - 1) ? SC_MIN(by1, mag) : (float)(P->j1 + 1);
         const float dist_from = SC_MAX(SC_ABS(px - qx0), SC_ABS(px - qx1)) + SC_MAX(SC_ABS(py - qy0), SC_ABS(py - qy1));
         const float tol = LS_DELTA + LS_REL_TOL * (anchor_err + (float)(nx + ny) + angle_err * (dist_from + 2.0f));
-        /* Which side the rest of the polygon is on (directions: the side they lead to) */
+        /* Which side the rest of the polygon is on (directions: the side they lead to). A finite vertex
+         * within the rounding of the edge's line may be on either side: the polygon then lies within the
+         * tolerance of that line there, and both sides are claimed (a thin polygon: a slab). A direction
+         * within its rounding may not be: the polygon goes without bound to a side the sign cannot
+         * tell, so it claims neither, and the edge separates nothing. (Claiming both had turned the
+         * half-plane seen from a light 1e-6 off a triangle's plane into a slab along its front edge,
+         * dropping most of its cells: docs/known-defects.md.) */
         int pos = 1, neg = 1;
         for (int m = 0; m < n; ++m) {
             if (m == a || m == b)
@@ -223,8 +229,8 @@ NOINLINE int ls_project(__global const float *prims, int p, __constant const flo
             if (P->dir[m]) {
                 const float f = gx * P->x[m] + gy * P->y[m];
                 const float t = LS_REL_TOL * (angle_err + P->err[m]);
-                pos &= f >= -t;
-                neg &= f <= t;
+                pos &= f > t;
+                neg &= f < -t;
             } else {
                 const float rx = P->x[m] - px, ry = P->y[m] - py;
                 const float f = gx * rx + gy * ry;

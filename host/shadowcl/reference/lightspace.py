@@ -158,8 +158,11 @@ def polygon_cells(H, nx, ny, domain, delta, scale=1):
         others = [m for m in range(n) if m not in (a, b)]
         vals = np.array([g @ (pts[m] - anchor) if finite[m] else g @ dirs[m] for m in others])
         scale = 1e-12 * (1 + np.abs(anchor).max())
-        pos = np.all(vals >= -scale)
-        neg = np.all(vals <= scale)
+        # a finite vertex on the line may lie on either side (the polygon is thin there: both sides); a
+        # direction along it leads to a side its sign cannot tell, without bound (neither side)
+        direction = np.array([not finite[m] for m in others], dtype=bool)
+        pos = np.all(np.where(direction, vals > scale, vals >= -scale))
+        neg = np.all(np.where(direction, vals < -scale, vals <= scale))
         mnx, mxx = _range(g[0], anchor[0], lx, hx)
         mny, mxy = _range(g[1], anchor[1], ly, hy)
         with np.errstate(invalid="ignore"):
