@@ -307,6 +307,19 @@ def test_huge_eps_is_honoured_by_the_shadow_map_and_refused_by_voxel(scene):
         sc.prepare(mesh, light, "voxel", eps=1e6)
 
 
+
+@pytest.mark.parametrize("method", METHODS)
+def test_eps_beyond_the_working_range_is_refused(scene, method):
+    """An eps of more than MAX_RECEIVER_DISTANCE scene sizes is refused by name (it had leaked float32
+    overflow warnings from the exact method, whose start p + eps n then overflowed)."""
+    v, f, points, normals = scene
+    mesh = sc.Mesh(v, f)
+    limit = MAX_RECEIVER_DISTANCE * np.linalg.norm(np.ptp(mesh.bounds, axis=0))
+    for eps in (1e300, 2.0 * limit):
+        with pytest.raises(ValueError, match="eps: .* outside the working range"):
+            sc.shadow_mask(mesh, sc.PointLight((0.7, 4.0, 0.4)), points, normals, method=method, eps=eps)
+    assert_right(method, mesh, sc.PointLight((0.7, 4.0, 0.4)), points, normals, eps=0.5 * limit, what="eps at half the limit")
+
 # the fuzz test -------------------------------------------------------------------------------------------
 
 PLACEMENTS = ("above", "far", "very far", "on a vertex", "near a face", "inside", "directional")

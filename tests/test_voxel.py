@@ -169,8 +169,15 @@ def test_locate_kernel_matches_reference(device, rng, frame_buffer):
 def test_scene_with_triangles_is_refused(device):
     surface = SubdivisionSurface(torus_net().reshape(-1, 3)[:4], [[0, 1, 2, 3]])
     scene = sc.Scene([("patch", surface), ("box", sc.Mesh(np.eye(3), [[0, 1, 2]]))], [LIGHTS["point"]])
-    with pytest.raises(ValueError, match="box"):
+    with pytest.raises(ValueError, match="scene_or_mesh: .*objects \\['box'\\] are triangle meshes"):
         voxel.VoxelMethod(device).prepare(scene, LIGHTS["point"], BOX, 1e-4)
+
+
+def test_a_mesh_is_refused_by_the_public_call_s_argument_name(device):
+    """A Mesh given to method="voxel" names the caller's argument, not an internal one."""
+    mesh = sc.Mesh(np.eye(3), [[0, 1, 2]])
+    with pytest.raises(TypeError, match="scene_or_mesh: the voxel method voxelizes subdivision surfaces, got a Mesh"):
+        sc.shadow_mask(mesh, LIGHTS["point"], np.zeros((2, 3)), method="voxel")
 
 
 def test_shadow_mask_on_a_scene(device):

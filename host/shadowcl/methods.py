@@ -50,6 +50,7 @@ import importlib
 import numpy as np
 
 from .checks import check_bounds, non_negative_float
+from .frame import MAX_RECEIVER_DISTANCE
 from .geometry import Mesh, bounds_diagonal
 from .lights import check_light
 
@@ -196,13 +197,20 @@ def default_eps(bounds: np.ndarray) -> float:
 
 def resolve_eps(cls, eps, bounds: np.ndarray) -> float:
     """The absolute eps of a public call to method ``cls``: the caller's, checked, else the default of
-    ``bounds``; ``ValueError`` when ``cls`` cannot honour an eps the caller gave."""
+    ``bounds``; ``ValueError`` when ``cls`` cannot honour an eps the caller gave, or when it is beyond
+    the working range (more than :data:`~shadowcl.frame.MAX_RECEIVER_DISTANCE` scene sizes, the
+    receivers' own limit: a start ``p + eps n`` is a receiver of the kernels' float32 arithmetic)."""
     if eps is None:
         return default_eps(bounds)
     if cls.eps_meaning is None:
         raise ValueError(f"eps: the {cls.name} method cannot honour eps (its resolution sets the offset); "
                          f"leave eps=None")
-    return non_negative_float("eps", eps)
+    eps = non_negative_float("eps", eps)
+    limit = MAX_RECEIVER_DISTANCE * bounds_diagonal(bounds)
+    if eps > limit:
+        raise ValueError(f"eps: {eps:.3g} is more than {MAX_RECEIVER_DISTANCE:.3g} scene sizes ({limit:.3g}), "
+                         f"outside the working range")
+    return eps
 
 
 def check_prepare(mesh, light, receiver_bounds, eps):

@@ -63,6 +63,7 @@ import pyopencl as cl
 from . import lightspace
 from . import voxelize as vz
 from .checks import check_bounds, choice, flag, optional_int
+from .geometry import Mesh
 from .lights import PointLight, check_light
 from .methods import Method
 from .points import check_points
@@ -79,17 +80,21 @@ NEIGHBOURS = np.array(sorted(((a, b, c) for a in range(-SEARCH, SEARCH + 1) for 
 
 
 def scene_patches(device, scene_or_surface):
-    """The patch table of everything the method voxelizes, refusing triangle objects (see module doc)."""
+    """The patch table of everything the method voxelizes, refusing triangle objects (see module doc);
+    errors name the public calls' argument, ``scene_or_mesh``."""
     surfaces = getattr(scene_or_surface, "surfaces", None)
     if surfaces is not None and hasattr(scene_or_surface, "objects"):
         names = {name for name, _ in surfaces}
         plain = [name for name, _ in scene_or_surface.objects if name not in names]
         if plain:
-            raise ValueError(f"scene: the voxel method only sees subdivision surfaces; objects {plain} are "
+            raise ValueError(f"scene_or_mesh: the voxel method only sees subdivision surfaces; objects {plain} are "
                              "triangle meshes (use method 'exact' or 'shadow_map' for them)")
         if not surfaces:
-            raise ValueError("scene: no subdivision surfaces to voxelize")
+            raise ValueError("scene_or_mesh: no subdivision surfaces to voxelize")
         return vz.merge_tables([surface.patch_table(device) for _, surface in surfaces])
+    if isinstance(scene_or_surface, Mesh):
+        raise TypeError("scene_or_mesh: the voxel method voxelizes subdivision surfaces, got a Mesh (use method "
+                        "'exact' or 'shadow_map' for triangle meshes)")
     return vz.patch_table_of(device, scene_or_surface)
 
 
