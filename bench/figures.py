@@ -56,6 +56,17 @@ def src(*names: str) -> str:
     return " (" + ", ".join(f"`{n}`" for n in names) + ")"
 
 
+def judged(peers: list[dict]) -> str:
+    """The float64 reference's verdict on the peers' disagreements with exact (run.judge_disputes), or ''."""
+    disputes = [r["disputes"] for r in peers if r.get("disputes")]
+    if not disputes:
+        return ""
+    total = {key: sum(d[key] for d in disputes) for key in ("judged", "truth_right", "row_right", "within_rounding")}
+    return (f"; of {total['judged']} such receivers judged by the float64 reference, exact is right on "
+            f"{total['truth_right']}, wrong on {total['row_right']}, and {total['within_rounding']} lie within "
+            f"float32 rounding (a segment within 1e-6 scene sizes of an edge or of its ends)")
+
+
 def exact_cells() -> tuple[str, str]:
     name, run = newest_run(lambda d: "oneshot_s" in d["rows"][0])
     rows = {(*report.case_key(r)[::2], r["label"]): r for r in run["rows"]}       # (scene, normals, label)
@@ -65,7 +76,8 @@ def exact_cells() -> tuple[str, str]:
     leaks = load("leaks.json")["rows"]
     with_without = " / ".join("with" if mode else "without" for mode in modes)
     error = (f"the reference: at most {max(r['wrong'] for r in peers)} of {count(peers[0]['receivers'])} receivers "
-             f"differ from {', '.join(sorted({r['method'] for r in peers}))} on {', '.join(scenes)} ({with_without} normals){src(name)}; "
+             f"differ from {', '.join(sorted({r['method'] for r in peers}))} on {', '.join(scenes)} ({with_without} normals)"
+             f"{judged(peers)}{src(name)}; "
              f"{sum(r['watertight_leaks'] for r in leaks)} leaks over {count(sum(r['rays'] for r in leaks))} rays "
              f"aimed at shared edges and vertices (dot5: {span([r['dot5_leak_percent'] for r in leaks])} %)"
              f"{src('leaks.json')}")

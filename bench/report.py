@@ -47,6 +47,14 @@ def case_key(row: dict) -> tuple:
     return row["scene"], row["light"], row.get("normals", True)
 
 
+def judged(disputes: dict | None, name: str) -> str:
+    """What the float64 reference said of a peer's disagreements with exact (run.judge_disputes), or ''."""
+    if not disputes:
+        return ""
+    return (f"; the float64 reference on {disputes['judged']} of them: exact right on {disputes['truth_right']}, "
+            f"{name} right on {disputes['row_right']}, {disputes['within_rounding']} within float32 rounding")
+
+
 def bars(doc: dict) -> list[str]:
     """The bars per case: exact's mask differences with each peer, and its one-shot throughput against
     the fastest peer's."""
@@ -62,7 +70,8 @@ def bars(doc: dict) -> list[str]:
             verdict = "met" if fraction <= AGREEMENT_BAR else "MISSED"
             lines.append(f"{scene} light {light}: exact and {name} differ on {peer['wrong']} of {peer['receivers']} "
                          f"receivers ({fraction:.2g}; {peer['false_shadow']} {name}-only shadow, "
-                         f"{peer['false_light']} exact-only shadow); bar <= {AGREEMENT_BAR:g}: {verdict}")
+                         f"{peer['false_light']} exact-only shadow){judged(peer.get('disputes'), name)}; "
+                         f"bar <= {AGREEMENT_BAR:g}: {verdict}")
         for row in group:
             if row["method"] == "exact" and row["vs_peer"] is not None:
                 verdict = "met" if row["vs_peer"] >= THROUGHPUT_BAR else "MISSED"

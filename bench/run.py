@@ -44,7 +44,9 @@ from peers import PEER, PEERS
 import shadowcl as sc
 from shadowcl.methods import default_eps, method_class, with_receiver_count
 from timing import Timing, clock, interleaved, timed
+from shadowcl.geometry import bounds_diagonal
 from shadowcl.metrics import mask_error
+from shadowcl.reference import exact as reference
 
 # Method name -> {parameter: [values]}; every combination is one row. Peers (peers.PEERS) take part
 # like methods. A method with a parameter sweep is one entry, e.g.
@@ -64,6 +66,12 @@ FULL_SWEEP = {**SWEEP, "shadow_map": {"resolution": [256, 1024, 2048, 4096, 8192
 FULL = {"ground": 1_000_000, "model": 200_000}
 QUICK = {"ground": 80_000, "model": 20_000}
 RESULTS = Path(__file__).resolve().parent / "results"
+# Receivers where a peer and the exact truth differ that are judged by the float64 reference (a seeded
+# sample beyond this many: the reference's brute force costs ~1 s per 1,000 receivers at 10 k triangles)
+MAX_JUDGED = 2000
+# Scene diagonals: the band of float32 rounding in which no float32 tool's answer is wrong (the
+# reference's tie margin, and how close a segment may pass to a triangle edge)
+ROUNDING_BAND = 1e-6
 # Seconds slept before each interleaved one-shot call. Mitsuba runs in this process, and its threads keep
 # the cores busy for a while after its call returns: measured on the default scene (medians of 9),
 # shadowcl's one-shot right after Mitsuba's took 55.2 ms, 0.2 s later 41.6, after its own call 43.5;
@@ -303,6 +311,27 @@ def measure_peer(case: Case, name: str, params: dict, truth: np.ndarray, repeats
             "host_profiled_wall_s": None, **row}
 
 
+def judge_disputes(case: Case, mask: np.ndarray, truth: np.ndarray) -> dict:
+    """Where ``mask`` (a peer's) and the exact ``truth`` differ, which one the float64 reference backs.
+
+    A receiver is decided when the reference gives the same answer with its tie moved
+    :data:`ROUNDING_BAND` scene sizes either way and the receiver's segment passes farther than that
+    from every triangle edge; otherwise it is within float32 rounding, where either answer is right.
+    At most :data:`MAX_JUDGED` receivers (a seeded sample) are judged.
+    """
+    disputed = np.flatnonzero(mask != truth)
+    if len(disputed) > MAX_JUDGED:
+        disputed = np.sort(np.random.default_rng(0).choice(disputed, MAX_JUDGED, replace=False))
+    mesh, band = case.scene.mesh, ROUNDING_BAND * bounds_diagonal(case.scene.mesh.bounds)
+    args = (mesh.vertices, mesh.faces, case.light, case.points[disputed],
+            None if case.normals is None else case.normals[disputed])
+    low = reference.shadow_mask(*args, eps=case.eps, margin=-band)
+    high = reference.shadow_mask(*args, eps=case.eps, margin=band)
+    decided = (low == high) & (reference.segment_edge_distance(*args, eps=case.eps) > band)
+    return {"judged": int(len(disputed)), "truth_right": int(np.sum(decided & (low == truth[disputed]))),
+            "row_right": int(np.sum(decided & (low == mask[disputed]))), "within_rounding": int(np.sum(~decided))}
+
+
 def measure(case: Case, method: str, params: dict, truth: np.ndarray, repeats: int, device,
             peers: dict = PEERS) -> dict:
     """One row of the results document (see bench/README.md)."""
@@ -336,6 +365,8 @@ def measure(case: Case, method: str, params: dict, truth: np.ndarray, repeats: i
         "wrong": error.wrong,
         "error_percent": 100 * error.fraction,
         "prepared_wrong": m["prepared_wrong"],
+        # a peer's disagreements with exact, judged by the float64 reference (None: none, or not a peer)
+        "disputes": judge_disputes(case, m["mask"], truth) if method in peers and error.wrong else None,
         "in_shadow": int(truth.sum()),
         "vs_peer": None,
         "host_s": m["host_s"],

@@ -164,6 +164,31 @@ def test_harness_rows_reports_and_compare(scene, device, tmp_path, monkeypatch):
     assert report.compare(doc, doc).count("| 1 | 1 | 1 |") == 3
 
 
+def test_disputes_are_judged_by_the_float64_reference(scene):
+    """A peer's disagreements with exact: the reference backs whichever side is right, and a segment
+    through a triangle edge is within float32 rounding, whatever the two said."""
+    points, normals = rx.receivers(scene, **COUNTS)
+    light = scene.lights[0]
+    eps = default_eps(scene.mesh.bounds)
+    edge_point, eye = np.array([-0.5, 1.0, 0.0]), light.position    # the middle of a top edge of the cube
+    start = eye + (edge_point - eye) * (eye[1] - eps) / (eye[1] - edge_point[1])   # at y = eps, on that line
+    points = np.vstack([points, start - [0.0, eps, 0.0]])      # a ground receiver whose segment s = p + eps n
+    normals = np.vstack([normals, [0.0, 1.0, 0.0]])            # runs through the edge
+    case = run.Case(scene, 0, points, normals, eps)
+    right = run.reference.shadow_mask(scene.mesh.vertices, scene.mesh.faces, light, points, normals, eps=case.eps)
+    clear = np.flatnonzero(run.reference.segment_edge_distance(scene.mesh.vertices, scene.mesh.faces, light,
+                                                                points, normals, eps=case.eps) > 1e-3)[:5]
+    flipped = right.copy()
+    flipped[clear] ^= True
+    flipped[-1] ^= True
+    assert run.judge_disputes(case, flipped, right) == {"judged": 6, "truth_right": 5, "row_right": 0,
+                                                        "within_rounding": 1}
+    assert run.judge_disputes(case, right, flipped) == {"judged": 6, "truth_right": 0, "row_right": 5,
+                                                        "within_rounding": 1}
+    assert "exact right on 5, embreex right on 0, 1 within float32 rounding" in report.judged(
+        run.judge_disputes(case, flipped, right), "embreex")
+
+
 def test_host_share_counts_opencl_calls_as_device_time(device):
     """A call that only waits in pyopencl has almost no host share; one that only works in NumPy, all."""
     data = np.zeros(1 << 22, np.float32)
