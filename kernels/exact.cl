@@ -13,9 +13,9 @@
  *                    cell (by atomic_inc on its count, or _ends: two halves binned serially, one filling
  *                    the cells from the front, one from the back); the code of a receiver needing no walk
  *   (device)         exclusive prefix sum of the counts (lists.prefix_sum)
- *   exact_bin_fill   per receiver with a slot: its Start and its index at its place in its cell
- *   exact_classify   per packet of LANES consecutive binned receivers (tmin from s, the coarse cell
- *                    from the fine one): the receivers of a cell share its list,
+ *   exact_bin_fill   per receiver with a slot: its Start, tagged with its index, at its place in its cell
+ *   exact_classify   per packet of LANES consecutive binned receivers (tmin and the cells found again
+ *                    from s, over lanes): the receivers of a cell share its list,
  *                    each triangle is loaded once and tested against all the packet's lanes still
  *                    unshadowed (plane cull and test over lanes: ray_triangle.h, vecmath.h), the walk
  *                    ends when they are all shadowed; each answer is written at its receiver's index.
@@ -226,11 +226,12 @@ INLINE lfloat start_tmin(lfloat sx, lfloat sy, lfloat sz, float lx, float ly, fl
 }
 
 /* The fine cell the started receivers (lanes) are binned in (brute_cell where the view cannot place
- * them), and in *coarse their coarse cell (-1 for brute_cell) */
-INLINE lint receiver_cell(__constant const float *views, int brute_cell, lfloat sx, lfloat sy, lfloat sz, lint *coarse)
+ * them), in *coarse their coarse cell (-1 for brute_cell) and in *sub the fine cell's bit in it */
+INLINE lint receiver_cell(__constant const float *views, int brute_cell, lfloat sx, lfloat sy, lfloat sz, lint *coarse,
+                          lint *sub)
 {
     lfloat w;
-    const lint cell = ls_point_cells(views, sx, sy, sz, &w, coarse);
+    const lint cell = ls_point_cells_sub(views, sx, sy, sz, &w, coarse, sub);
 #if PERSPECTIVE && NVIEWS == 1
     const lint placed = w > 0.0f;
     *coarse = placed ? *coarse : (lint)-1;
@@ -240,28 +241,22 @@ INLINE lint receiver_cell(__constant const float *views, int brute_cell, lfloat 
 #endif
 }
 
-/* The coarse cell of a receiver binned in fine cell `cell` (-1 for brute_cell), as receiver_cell gives,
- * and in *sub the fine cell's bit in it (LS_SUB_OF) */
-INLINE int receiver_coarse(__constant const float *views, int brute_cell, int cell, int *sub)
-{
-    *sub = 0;
-    return (cell == brute_cell) ? -1 : ls_coarse_cell(views, cell, sub);
-}
-
-/* A binned receiver: its start s and its fine cell (16 bytes: the count pass's output, the fill's
- * scattered record, the walk's input) */
+/* A started receiver: its start s and a tag, 16 bytes. In the count pass's output (the caller's order) the
+ * tag is its fine cell, where the fill places it; in the fill's output (cell by cell: the walk's input) it
+ * is the receiver's index, so that the fill scatters one record per receiver, not a start and an index to
+ * two places (the walk finds the cells again from s: the same floats give the same cells). */
 typedef struct {
     float x, y, z;
-    int cell;
+    int tag;
 } Start;
 
 #if WHOLE_PACKETS
 /* The Starts of 8 consecutive receivers (lanes) and their codes, written as four 32-byte and one 8-byte
  * vector stores (the records transposed from the lanes by shuffles). start must be 32-byte aligned. */
-INLINE void store_starts8(__global Start *start, __global uchar *out, lfloat x, lfloat y, lfloat z, lint cell,
+INLINE void store_starts8(__global Start *start, __global uchar *out, lfloat x, lfloat y, lfloat z, lint tag,
                           lint code)
 {
-    const lfloat c = as_float8(cell);
+    const lfloat c = as_float8(tag);
     const lfloat xy_lo = __builtin_shufflevector(x, y, 0, 8, 1, 9, 2, 10, 3, 11);      /* x0 y0 x1 y1 x2 y2 x3 y3 */
     const lfloat xy_hi = __builtin_shufflevector(x, y, 4, 12, 5, 13, 6, 14, 7, 15);
     const lfloat zc_lo = __builtin_shufflevector(z, c, 0, 8, 1, 9, 2, 10, 3, 11);
@@ -276,7 +271,7 @@ INLINE void store_starts8(__global Start *start, __global uchar *out, lfloat x, 
 
 /* 8 consecutive Start records (32-byte aligned) as lanes: four 32-byte loads, transposed by shuffles
  * (store_starts8's inverse) */
-INLINE void load_starts8(__global const Start *start, lfloat *x, lfloat *y, lfloat *z, lint *cell)
+INLINE void load_starts8(__global const Start *start, lfloat *x, lfloat *y, lfloat *z, lint *tag)
 {
     __global const float8 *r = (__global const float8 *)start;
     const lfloat r0 = r[0], r1 = r[1], r2 = r[2], r3 = r[3];      /* r0: x0 y0 z0 c0 x1 y1 z1 c1 */
@@ -287,7 +282,7 @@ INLINE void load_starts8(__global const Start *start, lfloat *x, lfloat *y, lflo
     *x = __builtin_shufflevector(lo, hi, 0, 1, 2, 3, 8, 9, 10, 11);
     *y = __builtin_shufflevector(lo, hi, 4, 5, 6, 7, 12, 13, 14, 15);
     *z = __builtin_shufflevector(lo2, hi2, 0, 1, 2, 3, 8, 9, 10, 11);
-    *cell = as_int8(__builtin_shufflevector(lo2, hi2, 4, 5, 6, 7, 12, 13, 14, 15));
+    *tag = as_int8(__builtin_shufflevector(lo2, hi2, 4, 5, 6, 7, 12, 13, 14, 15));
 }
 #endif
 
@@ -309,8 +304,8 @@ INLINE void bin_packet(int base, BIN_ARGS, __global uchar *out, __global Start *
     lfloat sx, sy, sz;
     const lint codes = receivers_start(base, n, points, normals, cx, cy, cz, inv_scale, ox, oy, oz, lx, ly, lz, eps,
                                        with_normals, &sx, &sy, &sz);
-    lint coarse;
-    const lint cells = (codes == WALK) ? receiver_cell(views, brute_cell, sx, sy, sz, &coarse) : (lint)-1;
+    lint coarse, sub;
+    const lint cells = (codes == WALK) ? receiver_cell(views, brute_cell, sx, sy, sz, &coarse, &sub) : (lint)-1;
     LANE_STORE(cells, cell);
 #if WHOLE_PACKETS
     if (base + LANES <= n)
@@ -388,34 +383,31 @@ INLINE int slot_place(int s, int lo, int hi)
     return (s & 1) ? hi - 1 - (s >> 1) : lo + (s >> 1);
 }
 
-/* Pass 2: every receiver with a slot copies its start to binned[k] and its index to index[k], k its place
- * in its cell (slot_place, the cell's bounds from offsets: the exclusive prefix sum of pass 1's counts),
- * so that they list the receivers cell by cell. A rank past its end's count (a bug: counts, row as in
+/* Pass 2: every receiver with a slot copies its start, tagged with its index, to binned[k], k its place in
+ * its cell (slot_place, the cell's bounds from offsets: the exclusive prefix sum of pass 1's counts), so
+ * that they list the receivers cell by cell. A rank past its end's count (a bug: counts, row as in
  * pass 1, second_row 0 for one row) would overwrite or go outside its cell: it is not written but counted
  * in *dropped, which the host checks. */
 __kernel void exact_bin_fill(int n, __global const Start *start, __global const int *slot,
                              __global const int *counts, int second_row, __global const int *offsets,
-                             __global Start *binned, __global int *index, __global volatile int *dropped)
+                             __global Start *binned, __global volatile int *dropped)
 {
     const int i = get_global_id(0);
     if (i >= n)
         return;
-    /* The slots are scattered over the whole binned array: ask for the lines of the receiver FILL_AHEAD on
-     * before they are written (with the write hint) */
+    /* The slots are scattered over the whole binned array: ask for the line of the receiver FILL_AHEAD on
+     * before it is written (with the write hint) */
     const int ahead = i + FILL_AHEAD;
     if (ahead < n && slot[ahead] >= 0) {
-        const int c = start[ahead].cell;
-        const int k = slot_place(slot[ahead], offsets[c], offsets[c + 1]);
-        SC_PREFETCH(binned + k, 1);
-        SC_PREFETCH(index + k, 1);
+        const int c = start[ahead].tag;
+        SC_PREFETCH(binned + slot_place(slot[ahead], offsets[c], offsets[c + 1]), 1);
     }
     const int s = slot[i];
     if (s >= 0) {
         const Start r = start[i];
-        if ((s >> 1) < counts[(s & 1) * second_row + r.cell]) {
-            const int k = slot_place(s, offsets[r.cell], offsets[r.cell + 1]);
-            binned[k] = r;
-            index[k] = i;
+        if ((s >> 1) < counts[(s & 1) * second_row + r.tag]) {
+            const Start tagged = {r.x, r.y, r.z, i};
+            binned[slot_place(s, offsets[r.tag], offsets[r.tag + 1])] = tagged;
         } else {
             atomic_inc(dropped);
         }
@@ -530,49 +522,40 @@ INLINE lint walk_cells(const int *cell, const int *sub, lint valid, lint hit, co
     return hit;
 }
 
-/* Pass 3. Contract: binned, index: nbinned starts and receiver indices of pass 2; views: the grid; tris: triangle
- * records (see TEST_DOT5); lists_a, lists_b: (offsets, items) or (heads, nodes) over the grid's cells;
- * coarse_masks: the CSR coarse entries' fine cells (lightspace.py Lists.fine_masks) or NULL; (lx, ly, lz):
- * light position (relative) or direction; eps: as pass 1's; walk_coarse: 0 when no primitive is coarse (the
- * coarse lists are empty). Writes out[index] for every binned receiver (of n). */
-NOINLINE void exact_classify_item(int base, __global const Start *binned, __global const int *binned_index,
-                                  int nbinned, __constant const float *views, __global const float *tris, int ntris,
-                                  int brute_cell, __global const int *lists_a, __global const int *lists_b,
-                                  __global const ulong *coarse_masks, float lx, float ly, float lz, float eps,
-                                  int walk_coarse, int n, __global uchar *out)
+/* Pass 3. Contract: binned: nbinned starts tagged with their receivers' indices, pass 2's; views: the grid;
+ * tris: triangle records (see TEST_DOT5); lists_a, lists_b: (offsets, items) or (heads, nodes) over the
+ * grid's cells; coarse_masks: the CSR coarse entries' fine cells (lightspace.py Lists.fine_masks) or NULL;
+ * (lx, ly, lz): light position (relative) or direction; eps: as pass 1's; walk_coarse: 0 when no primitive
+ * is coarse (the coarse lists are empty). Writes out[index] for every binned receiver (of n). */
+NOINLINE void exact_classify_item(int base, __global const Start *binned, int nbinned, __constant const float *views,
+                                  __global const float *tris, int ntris, int brute_cell, __global const int *lists_a,
+                                  __global const int *lists_b, __global const ulong *coarse_masks, float lx, float ly,
+                                  float lz, float eps, int walk_coarse, int n, __global uchar *out)
 {
-    /* The lanes' receivers; lanes past the end repeat the last one and are not valid. Lanes of one cell
-     * (most of them) share its coarse cell: found once. */
+    /* The lanes' receivers; lanes past the end repeat the last one and are not valid */
     lfloat x, y, z;
-    lint cells;
-    int fine[LANES], coarse[LANES], sub[LANES], index[LANES], lane[LANES];
+    lint tags;
 #if WHOLE_PACKETS
     if (base + LANES <= nbinned) {
-        load_starts8(binned + base, &x, &y, &z, &cells);
-        LANE_STORE(cells, fine);
-        LANE_STORE(*(__global const lint *)(binned_index + base), index);
+        load_starts8(binned + base, &x, &y, &z, &tags);
     } else
 #endif
     {
         float sx[LANES], sy[LANES], sz[LANES];
+        int tag[LANES];
         for (int j = 0; j < LANES; ++j) {
-            const int k = SC_IMIN(base + j, nbinned - 1);
-            const Start r = binned[k];
-            sx[j] = r.x; sy[j] = r.y; sz[j] = r.z;
-            fine[j] = r.cell;
-            index[j] = binned_index[k];
+            const Start r = binned[SC_IMIN(base + j, nbinned - 1)];
+            sx[j] = r.x; sy[j] = r.y; sz[j] = r.z; tag[j] = r.tag;
         }
-        x = LANE_LOAD(float, sx); y = LANE_LOAD(float, sy); z = LANE_LOAD(float, sz);
+        x = LANE_LOAD(float, sx); y = LANE_LOAD(float, sy); z = LANE_LOAD(float, sz); tags = LANE_LOAD(int, tag);
     }
-    for (int j = 0; j < LANES; ++j) {
-        if (j > 0 && fine[j] == fine[j - 1]) {
-            coarse[j] = coarse[j - 1];
-            sub[j] = sub[j - 1];
-        } else {
-            coarse[j] = receiver_coarse(views, brute_cell, fine[j], &sub[j]);
-        }
+    int fine[LANES], coarse[LANES], sub[LANES], index[LANES], lane[LANES];
+    lint coarse_lanes, sub_lanes;
+    const lint fine_lanes = receiver_cell(views, brute_cell, x, y, z, &coarse_lanes, &sub_lanes);
+    LANE_STORE(fine_lanes, fine); LANE_STORE(coarse_lanes, coarse); LANE_STORE(sub_lanes, sub);
+    LANE_STORE(tags, index);
+    for (int j = 0; j < LANES; ++j)
         lane[j] = base + j;
-    }
     const lint valid = LANE_LOAD(int, lane) < nbinned;
     const Packet p = packet(x, y, z, start_tmin(x, y, z, lx, ly, lz, eps), lx, ly, lz);
     lint hit = walk_cells(fine, 0, valid, (lint)0, &p, tris, ntris, brute_cell, lists_a, lists_b, 0, 0);
@@ -588,7 +571,7 @@ NOINLINE void exact_classify_item(int base, __global const Start *binned, __glob
 
 /* Pass 3's kernel: work-item g classifies the packet from binned receiver LANES g (its body is a NOINLINE
  * function: vecmath.h says why) */
-__kernel void exact_classify(__global const Start *binned, __global const int *binned_index, int nbinned,
+__kernel void exact_classify(__global const Start *binned, int nbinned,
                              __constant const float *views, __global const float *tris, int ntris, int brute_cell,
                              __global const int *lists_a, __global const int *lists_b,
                              __global const ulong *coarse_masks, float lx, float ly, float lz, float eps,
@@ -596,7 +579,7 @@ __kernel void exact_classify(__global const Start *binned, __global const int *b
 {
     const int base = LANES * get_global_id(0);
     if (base < nbinned)
-        exact_classify_item(base, binned, binned_index, nbinned, views, tris, ntris, brute_cell, lists_a, lists_b,
+        exact_classify_item(base, binned, nbinned, views, tris, ntris, brute_cell, lists_a, lists_b,
                             coarse_masks, lx, ly, lz, eps, walk_coarse, n, out);
 }
 
@@ -618,15 +601,13 @@ __kernel void exact_classify_points(BIN_ARGS, __global const float *tris, int nt
         out[i] = (uchar)code;
         return;
     }
-    int coarse;
-    const int fine = receiver_cell(views, brute_cell, sx, sy, sz, &coarse);
+    int coarse, sub;
+    const int fine = receiver_cell(views, brute_cell, sx, sy, sz, &coarse, &sub);
     if (fine == brute_cell)
         atomic_inc(behind);
     const Packet p = packet(sx, sy, sz, start_tmin(sx, sy, sz, lx, ly, lz, eps), lx, ly, lz);
     int hit = walk_cells(&fine, 0, 1, 0, &p, tris, ntris, brute_cell, lists_a, lists_b, 0, 0);
     if (walk_coarse && coarse >= 0) {
-        int sub;
-        receiver_coarse(views, brute_cell, fine, &sub);
         hit = walk_cells(&coarse, &sub, 1, hit, &p, tris, ntris, brute_cell, lists_a, lists_b, coarse_masks,
                          VIEW_BASE1(views));
     }

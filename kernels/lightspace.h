@@ -93,14 +93,16 @@ INLINE lint ls_point_view(__constant const float *views, lfloat px, lfloat py, l
 #endif
 }
 
-/* A point's fine cell index (over all views) and, in *coarse, its coarse cell index; *w gets W (a
+/* A point's fine cell index (over all views) and, in *coarse, its coarse cell index, in *sub the fine
+ * cell's bit in it (LS_SUB_OF); *w gets W (a
  * single perspective view cannot place a point with W <= 0: the caller must handle it). Written over
  * lanes (vecmath.h). A cube's lanes take their face's parameters by a chain of selects, not by a load at
  * an index per lane (PoCL's LLVM 14 scalarised a whole pass over such gathers: docs/exact-speed.md),
  * and only those a face's rows need: a face looking along axis a (fit_views) has its X row non-zero at
  * a and a + 1 only, its Y row at a and a + 2, its W row (+-1) at a, and no constant column, so
  * X = Mx[a] d[a] + Mx[a+1] d[a+1] is the whole row's sum to the bit (its other terms are zeros). */
-INLINE lint ls_point_cells(__constant const float *views, lfloat px, lfloat py, lfloat pz, lfloat *w, lint *coarse)
+INLINE lint ls_point_cells_sub(__constant const float *views, lfloat px, lfloat py, lfloat pz, lfloat *w, lint *coarse,
+                                lint *sub)
 {
     const lfloat dx = px - views[0], dy = py - views[1], dz = pz - views[2];    /* the anchor: one for all views */
     lint nx = (lint)VIEW_NX(views), ny = (lint)VIEW_NY(views), base0 = (lint)VIEW_BASE0(views);
@@ -132,20 +134,15 @@ INLINE lint ls_point_cells(__constant const float *views, lfloat px, lfloat py, 
     *w = W;
     const lint i = ls_clamp_cell(X / W, nx), j = ls_clamp_cell(Y / W, ny);
     *coarse = LS_COARSE_OF(base1, nx1, i, j);
+    *sub = LS_SUB_OF(i, j);
     return base0 + j * nx + i;
 }
 
-/* The coarse cell of fine cell `cell` (numbered over all views, as ls_point_cells gives it), and in *sub
- * the fine cell's bit in it (LS_SUB_OF): its view is the last whose fine cells start at or before it. */
-INLINE int ls_coarse_cell(__constant const float *views, int cell, int *sub)
+/* ls_point_cells_sub without the fine cell's bit */
+INLINE lint ls_point_cells(__constant const float *views, lfloat px, lfloat py, lfloat pz, lfloat *w, lint *coarse)
 {
-    int k = 0;
-    for (int m = 1; m < NVIEWS; ++m)
-        k = (cell >= VIEW_BASE0(views + VIEW_FLOATS * m)) ? m : k;
-    __constant const float *v = views + VIEW_FLOATS * k;
-    const int k_cell = cell - VIEW_BASE0(v), j = k_cell / VIEW_NX(v), i = k_cell - j * VIEW_NX(v);
-    *sub = LS_SUB_OF(i, j);
-    return LS_COARSE_OF(VIEW_BASE1(v), VIEW_NX1(v), i, j);
+    lint sub;
+    return ls_point_cells_sub(views, px, py, pz, w, coarse, &sub);
 }
 
 #endif

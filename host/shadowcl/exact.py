@@ -45,11 +45,16 @@ receivers on the ground + 200 k on the model, random order, PoCL on 2 cores; ran
   masks), finds their cells over lanes too (kernels/lightspace.h ls_point_cells: then, the same way,
   default 15.6 -> 11.8 / 15.0 -> 9.9, light_inside 16.0 -> 12.1 / 12.9 -> 7.7, bunny 13.5 -> 9.9 / 10.1
   -> 7.6, ogre 13.1 -> 9.9 / 10.5 -> 7.7) and writes a
-  16-byte record of its start and cell in the caller's order; pass 2 scatters that record and the
-  receiver's index; the walk reads them in order and recomputes only tmin (a square root per packet)
-  and the coarse cell (once per distinct cell of the packet). Against re-finding the cell from the
-  start in passes 2 and 3 (bunny bench with normals, alternating processes, medians of 5, three
-  rounds): fill 13.0, 12.9, 12.8 -> 11.0, 7.0, 7.2 ms, one-shot 97.5, 92.6, 91.6 -> 100.4, 85.8, 84.5 ms.
+  16-byte record of its start and cell in the caller's order; pass 2 scatters that record with the
+  receiver's index in place of the cell (one 16-byte store, one line, per receiver); the walk reads
+  them in order and recomputes tmin (a square root per packet) and the cells from the start, over
+  lanes. Against re-finding the cell from the start in pass 2 too (bunny bench with normals,
+  alternating processes, medians of 5, three rounds): fill 13.0, 12.9, 12.8 -> 11.0, 7.0, 7.2 ms,
+  one-shot 97.5, 92.6, 91.6 -> 100.4, 85.8, 84.5 ms. Against scattering the cell-tagged record and the
+  index to two arrays (two lines per receiver; 2026-12-07, alternating processes, medians of 3 runs of
+  7 calls, fill ms, with / without normals): bunny 9.7 -> 5.9 / 10.8 -> 8.0, default 7.7 -> 7.7 / 6.9
+  -> 5.4, light_inside 9.5 -> 7.5 / 11.0 -> 9.5, city_block 9.2 -> 7.4 / 12.2 -> 8.5, teapot 7.0 -> 6.0 /
+  7.2 -> 5.3; the walk within this VM's noise (+-2 ms both ways), the masks identical.
   The slots: on a CPU of up to 4 cores two work-items bin half the receivers each, serially, counting
   in rows of their own and filling the cells from both ends (no atomics: :func:`bins_from_both_ends`;
   default scene, alternating processes, medians of 4: the pass 10.3 -> 7.1 ms, the call 38.5 -> 34.5);
@@ -476,15 +481,14 @@ class ExactMethod(Method):
         second_row = row if self._both_ends else 0
         binned_count = self._builder.prefix_sum(self.grid, counts, brute_cell + 1, offsets, second_row)
         if binned_count:
-            by_cell = dev.scratch("exact: receiver starts by cell", 16 * binned_count)
-            index = dev.scratch("exact: receiver indices by cell", 4 * binned_count)
+            by_cell = dev.scratch("exact: receiver starts by cell", 16 * binned_count)   # tagged with their index
             dropped = dev.scratch("exact: dropped receivers", 4)
             cl.enqueue_fill_buffer(queue, dropped, np.int32(0), 0, 4)
             dev.kernel("exact.cl", "exact_bin_fill", options)(queue, (n,), None, np.int32(n), start, slot, counts,
-                                                              np.int32(second_row), offsets, by_cell, index, dropped)
+                                                              np.int32(second_row), offsets, by_cell, dropped)
             check_filled(dev, dropped, "exact: the receivers' binning")
             dev.kernel("exact.cl", "exact_classify", options)(
-                queue, (-(-binned_count // BIN_LANES),), None, by_cell, index, np.int32(binned_count),
+                queue, (-(-binned_count // BIN_LANES),), None, by_cell, np.int32(binned_count),
                 self.lists.params, self._records, np.int32(self._ntris), np.int32(brute_cell), lists_a, lists_b,
                 self.lists.fine_masks, *light, np.float32(self.eps), walk_coarse, np.int32(n), out_dev)
         brute = np.empty(2, np.int32)                    # the brute cell's bounds
