@@ -9,11 +9,13 @@
  * The passes: the count / scan / fill of the occluder lists (lightspace.cl) applied to the receivers,
  * then the walk in the irregular Z-buffer's traversal order (the receivers of a cell together):
  *   exact_bin_count  per LANES receivers: check them, start them (s, over lanes), find each one's fine
- *                    cell, write its Start (s and the cell) in the caller's order and take a slot in the
- *                    cell (by atomic_inc on its count, or _ends: two halves binned serially, one filling
- *                    the cells from the front, one from the back); the code of a receiver needing no walk
+ *                    cell, write its Start (s and the cell) in the caller's order and count it in the
+ *                    cell (its slot by atomic_inc on the cell's count, or _ends: two halves counted
+ *                    serially in rows of their own); the code of a receiver needing no walk
  *   (device)         exclusive prefix sum of the counts (lists.prefix_sum)
- *   exact_bin_fill   per receiver with a slot: its Start, tagged with its index, at its place in its cell
+ *   exact_bin_fill   per walking receiver: its Start, tagged with its index, at its place in its cell
+ *                    (at its slot, or _ends: the two halves replayed, one filling the cells from the
+ *                    front, one from the back)
  *   exact_classify   per packet of LANES consecutive binned receivers (tmin and the cells found again
  *                    from s, over lanes): the receivers of a cell share its list,
  *                    each triangle is loaded once and tested against all the packet's lanes still
@@ -324,10 +326,10 @@ INLINE void bin_packet(int base, BIN_ARGS, __global uchar *out, __global Start *
     }
 }
 
-/* Pass 1 also gives each walking receiver its slot in its cell (slot[i], -1 for none), counted in counts,
- * which the prefix sum turns into the fill's offsets. A slot is rank << 1 | end: the receiver goes rank
- * places from its cell's front (end 0) or back (end 1). Two ways, the host picks one for its device:
- *   exact_bin_count       one packet per work-item, a front slot by atomic_inc on its cell's count (a GPU's
+/* Pass 1 also counts each walking receiver in its cell, in counts, which the prefix sum turns into the
+ * fill's offsets. Two ways, the host picks one for its device:
+ *   exact_bin_count       one packet per work-item, its slot (rank in its cell, slot[i]; -1 for a receiver
+ *                         needing no walk) by atomic_inc on its cell's count (a GPU's
  *                         way, or a CPU's with many cores; counts: brute_cell + 1 ints, zeroed). The
  *                         atomics come last and back to back: each drains the stores before it, and
  *                         interleaved with the starts' stores they cost twice as much (bunny bench: the
@@ -336,10 +338,11 @@ INLINE void bin_packet(int base, BIN_ARGS, __global uchar *out, __global Start *
  *                         them in a row of its own, counts[end (brute_cell + 2) + cell]: no atomics (on a
  *                         2-core CPU the pass 8.6-10.4 -> 5.0-8.2 ms), and no cache line shared between
  *                         the two (counters interleaved, (cell, owner) side by side, went back and forth
- *                         between the cores: 9.3 ms against 9.6 with atomics). The first half fills its
- *                         cells from the front, the second from the back, so that the offsets stay one per
- *                         cell (per (cell, owner) offsets made the fill 5.2 -> 8.5 ms on ogre) and a
- *                         cell's receivers stay together. counts: 2 (brute_cell + 2) ints, zeroed; the
+ *                         between the cores: 9.3 ms against 9.6 with atomics). exact_bin_fill_ends fills
+ *                         the first half's places from the cells' fronts, the second's from their backs,
+ *                         so that the offsets stay one per cell (per (cell, owner) offsets made the fill
+ *                         5.2 -> 8.5 ms on ogre) and a cell's receivers stay together. counts: 2
+ *                         (brute_cell + 2) ints, zeroed; the
  *                         prefix sum adds the rows (lists.h second_row); each row's last entry collects
  *                         the receivers that need no walk (not scanned), so that the loop has no branch. */
 __kernel void exact_bin_count(BIN_ARGS, __global int *counts, __global int *slot, __global uchar *out,
@@ -351,11 +354,11 @@ __kernel void exact_bin_count(BIN_ARGS, __global int *counts, __global int *slot
     int cell[LANES];
     bin_packet(base, BIN_ARG_NAMES, out, start, cell);
     for (int j = 0; j < LANES && base + j < n; ++j)
-        slot[base + j] = (cell[j] >= 0) ? atomic_inc(&counts[cell[j]]) << 1 : -1;
+        slot[base + j] = (cell[j] >= 0) ? atomic_inc(&counts[cell[j]]) : -1;
 }
 
-__kernel void exact_bin_count_ends(BIN_ARGS, int per_end, __global int *counts, __global int *slot,
-                                   __global uchar *out, __global Start *start)
+__kernel void exact_bin_count_ends(BIN_ARGS, int per_end, __global int *counts, __global uchar *out,
+                                   __global Start *start)
 {
     const int end = get_global_id(0), spare = brute_cell + 1;
     const int last = SC_IMIN(n, (end + 1) * per_end * LANES);
@@ -363,12 +366,8 @@ __kernel void exact_bin_count_ends(BIN_ARGS, int per_end, __global int *counts, 
     for (int base = end * per_end * LANES; base < last; base += LANES) {
         int cell[LANES];
         bin_packet(base, BIN_ARG_NAMES, out, start, cell);
-        for (int j = 0; j < LANES && base + j < n; ++j) {
-            const int k = cell[j] >= 0 ? cell[j] : spare;
-            const int rank = row[k];
-            row[k] = rank + 1;
-            slot[base + j] = (cell[j] >= 0) ? (rank << 1) | end : -1;
-        }
+        for (int j = 0; j < LANES && base + j < n; ++j)
+            ++row[cell[j] >= 0 ? cell[j] : spare];
     }
 }
 
@@ -377,41 +376,69 @@ __kernel void exact_bin_count_ends(BIN_ARGS, int per_end, __global int *counts, 
  * default 5.0 -> 4.9 / 6.8 -> 4.7, light_inside 4.4 -> 5.3 / 6.7 -> 5.3 (16 and 32 ahead did no better). */
 #define FILL_AHEAD 64
 
-/* Where the receiver with slot s in the cell [lo, hi) of the binned arrays goes */
-INLINE int slot_place(int s, int lo, int hi)
-{
-    return (s & 1) ? hi - 1 - (s >> 1) : lo + (s >> 1);
-}
-
-/* Pass 2: every receiver with a slot copies its start, tagged with its index, to binned[k], k its place in
- * its cell (slot_place, the cell's bounds from offsets: the exclusive prefix sum of pass 1's counts), so
- * that they list the receivers cell by cell. A rank past its end's count (a bug: counts, row as in
- * pass 1, second_row 0 for one row) would overwrite or go outside its cell: it is not written but counted
- * in *dropped, which the host checks. */
+/* Pass 2: every walking receiver copies its start, tagged with its index, to its place in its cell of
+ * binned (the cell's slots from offsets: the exclusive prefix sum of pass 1's counts), so that they list
+ * the receivers cell by cell. A receiver past its cell's count (a bug) would overwrite another or go
+ * outside its cell: it is not written but counted in *dropped, which the host checks. Two ways, after
+ * pass 1's two:
+ *   exact_bin_fill       per receiver, its place offsets[cell] + slot[i] (exact_bin_count's atomic ranks).
+ *   exact_bin_fill_ends  exact_bin_count_ends' two work-items replay their halves in the same order, each
+ *                        taking its cell's places from its row of counts down to zero: the first half
+ *                        from the cell's front, the second from its back. No slot per receiver to write
+ *                        and read back (4 bytes each way), and no atomics; the counts end at zero. */
 __kernel void exact_bin_fill(int n, __global const Start *start, __global const int *slot,
-                             __global const int *counts, int second_row, __global const int *offsets,
-                             __global Start *binned, __global volatile int *dropped)
+                             __global const int *counts, __global const int *offsets, __global Start *binned,
+                             __global volatile int *dropped)
 {
     const int i = get_global_id(0);
     if (i >= n)
         return;
-    /* The slots are scattered over the whole binned array: ask for the line of the receiver FILL_AHEAD on
-     * before it is written (with the write hint) */
+    /* The places are scattered over the whole binned array: ask for the line of the receiver FILL_AHEAD
+     * on before it is written (with the write hint) */
     const int ahead = i + FILL_AHEAD;
-    if (ahead < n && slot[ahead] >= 0) {
-        const int c = start[ahead].tag;
-        SC_PREFETCH(binned + slot_place(slot[ahead], offsets[c], offsets[c + 1]), 1);
-    }
+    if (ahead < n && slot[ahead] >= 0)
+        SC_PREFETCH(binned + offsets[start[ahead].tag] + slot[ahead], 1);
     const int s = slot[i];
     if (s >= 0) {
         const Start r = start[i];
-        if ((s >> 1) < counts[(s & 1) * second_row + r.tag]) {
+        if (s < counts[r.tag]) {
             const Start tagged = {r.x, r.y, r.z, i};
-            binned[slot_place(s, offsets[r.tag], offsets[r.tag + 1])] = tagged;
+            binned[offsets[r.tag] + s] = tagged;
         } else {
             atomic_inc(dropped);
         }
     }
+}
+
+__kernel void exact_bin_fill_ends(int n, int per_end, __global const Start *start, __global int *counts,
+                                  int second_row, __global const int *offsets, __global Start *binned,
+                                  __global volatile int *dropped)
+{
+    const int end = get_global_id(0);
+    const int last = SC_IMIN(n, (end + 1) * per_end * LANES);
+    __global int *row = counts + end * second_row;
+    int lost = 0;
+    for (int i = end * per_end * LANES; i < last; ++i) {
+        const int ahead = i + FILL_AHEAD;
+        if (ahead < last) {
+            const int c = start[ahead].tag;       /* its place as it stands now: the same line or the next */
+            if (c >= 0)
+                SC_PREFETCH(binned + (end ? offsets[c + 1] - row[c] : offsets[c] + row[c] - 1), 1);
+        }
+        const Start r = start[i];
+        if (r.tag < 0)
+            continue;
+        const int left = row[r.tag] - 1;          /* this end's places left in the cell after this one */
+        if (left < 0) {
+            ++lost;
+            continue;
+        }
+        row[r.tag] = left;
+        const Start tagged = {r.x, r.y, r.z, i};
+        binned[end ? offsets[r.tag + 1] - 1 - left : offsets[r.tag] + left] = tagged;
+    }
+    if (lost)
+        atomic_add(dropped, lost);
 }
 
 /* A packet's lanes: their starts, directions to the light, intervals and watertight set-up */

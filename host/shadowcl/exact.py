@@ -58,7 +58,12 @@ receivers on the ground + 200 k on the model, random order, PoCL on 2 cores; ran
   The slots: on a CPU of up to 4 cores two work-items bin half the receivers each, serially, counting
   in rows of their own and filling the cells from both ends (no atomics: :func:`bins_from_both_ends`;
   default scene, alternating processes, medians of 4: the pass 10.3 -> 7.1 ms, the call 38.5 -> 34.5);
-  elsewhere atomic_inc per receiver, last and back to back: a locked operation drains the stores
+  the fill's two work-items replay the same halves, taking places from their rows down to zero, so no
+  slot per receiver is stored (against the slot array and a fill per receiver, 2026-12-07, alternating
+  processes, medians of 3 rounds of 5, count + fill ms with / without normals: default 16.5 -> 14.3 /
+  11.6 -> 12.0, light_inside 14.9 -> 13.2 / 15.1 -> 12.2, bunny 14.2 -> 12.4 / 9.9 -> 11.4: the count
+  1-2 ms cheaper everywhere, the serial fill up to 1.7 ms dearer without normals). Elsewhere
+  atomic_inc per receiver, last and back to back: a locked operation drains the stores
   before it, and interleaved with the records' stores the pass took 20.5-21.4 ms against 15.0-15.4. (Earlier, 2026-12-02: scattering the start instead of re-reading float64 points and
   normals in pass 2 took the fill from 126-448 to 40-172 ms on a loaded machine; the walk gathering
   records through the index instead of a scatter pass cost what the scatter saved.) Tried and
@@ -466,13 +471,14 @@ class ExactMethod(Method):
         row = brute_cell + 2                          # a row of counts: every cell, then the non-walkers
         counts = dev.scratch("exact: receiver cell counts", 4 * row * rows)
         cl.enqueue_fill_buffer(queue, counts, np.int32(0), 0, 4 * row * rows)
-        slot = dev.scratch("exact: receiver slots", 4 * n)
         start = dev.scratch("exact: receiver starts", 16 * n)          # (s, cell) per receiver: kernels/exact.cl Start
         packets = -(-n // BIN_LANES)
+        per_end = np.int32(-(-packets // 2))
         if self._both_ends:
             dev.kernel("exact.cl", "exact_bin_count_ends", options)(
-                queue, (2,), (1,), *bin_args, np.int32(-(-packets // 2)), counts, slot, out_dev, start)
+                queue, (2,), (1,), *bin_args, per_end, counts, out_dev, start)
         else:
+            slot = dev.scratch("exact: receiver slots", 4 * n)
             dev.kernel("exact.cl", "exact_bin_count", options)(queue, (packets,), None, *bin_args, counts, slot,
                                                                out_dev, start)
         offsets = dev.scratch("exact: receiver cell offsets", 4 * (brute_cell + 2))
@@ -484,8 +490,12 @@ class ExactMethod(Method):
             by_cell = dev.scratch("exact: receiver starts by cell", 16 * binned_count)   # tagged with their index
             dropped = dev.scratch("exact: dropped receivers", 4)
             cl.enqueue_fill_buffer(queue, dropped, np.int32(0), 0, 4)
-            dev.kernel("exact.cl", "exact_bin_fill", options)(queue, (n,), None, np.int32(n), start, slot, counts,
-                                                              np.int32(second_row), offsets, by_cell, dropped)
+            if self._both_ends:
+                dev.kernel("exact.cl", "exact_bin_fill_ends", options)(
+                    queue, (2,), (1,), np.int32(n), per_end, start, counts, np.int32(row), offsets, by_cell, dropped)
+            else:
+                dev.kernel("exact.cl", "exact_bin_fill", options)(queue, (n,), None, np.int32(n), start, slot, counts,
+                                                                  offsets, by_cell, dropped)
             check_filled(dev, dropped, "exact: the receivers' binning")
             dev.kernel("exact.cl", "exact_classify", options)(
                 queue, (-(-binned_count // BIN_LANES),), None, by_cell, np.int32(binned_count),
