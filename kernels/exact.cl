@@ -40,7 +40,7 @@
  * a prepared method's every kernel and call (on PoCL each build costs ~0.2 s of a cold start).
  *
  * Codes in out[i]: 1 in shadow, 0 lit, 3 the point is not finite, 4 the normal is zero or not finite
- * (the host raises for 3 and 4).
+ * (the host raises for 3 and 4), FAR (5) the point lies beyond the near box (answered by the host).
  */
 #include "lightspace.h"
 #include "ray_triangle.h"
@@ -70,6 +70,7 @@
 /* A normal's squared length float32 holds well; outside it the normal is rescaled in the input precision */
 #define NORMAL_LEN2_OK(len2) (((len2) > 1.0e-30f) & ((len2) < 1.0e30f))
 #define WALK 0              /* receivers_start: the receiver needs a walk */
+#define FAR 5               /* receivers_start: the point lies beyond the near box (Move), answered by the host */
 
 #if LIGHT_POINT
 #define TMAX 1.0f           /* t in units of |light - s| */
@@ -77,16 +78,33 @@
 #define TMAX SC_BIG
 #endif
 
-/* Receiver i moved into the working frame ((x - c) * inv_scale) and made relative to (ox, oy, oz) in the
- * input precision (the host's bits), rounded to float32 in *px, *py, *pz: 3 when it is not finite, else WALK. */
-INLINE int receiver_point(int i, __global const input_t *points, input_t cx, input_t cy, input_t cz, input_t inv_scale,
-                          input_t ox, input_t oy, input_t oz, float *px, float *py, float *pz)
+/* How the caller's points reach the working frame: moved ((x - c) * inv_scale) and made relative to
+ * (ox, oy, oz) in the input precision, as the host would; and the near box (lo, hi) in those coordinates:
+ * a point beyond it (an infinity too) is not walked but coded FAR, for the host to answer (shadowcl.Shadows
+ * clips such receivers' segments; +-inf: none is). */
+typedef struct {
+    input_t cx, cy, cz, inv_scale, ox, oy, oz;
+    input_t lo_x, lo_y, lo_z, hi_x, hi_y, hi_z;
+} Move;
+
+#define MOVE_ARGS                                                                                    \
+    input_t cx, input_t cy, input_t cz, input_t inv_scale, input_t ox, input_t oy, input_t oz,        \
+        input_t lo_x, input_t lo_y, input_t lo_z, input_t hi_x, input_t hi_y, input_t hi_z
+#define MOVE_OF_ARGS {cx, cy, cz, inv_scale, ox, oy, oz, lo_x, lo_y, lo_z, hi_x, hi_y, hi_z}
+#define BEYOND(m, x, y, z) (((x) < (m)->lo_x) | ((x) > (m)->hi_x) | ((y) < (m)->lo_y) | ((y) > (m)->hi_y) | \
+                            ((z) < (m)->lo_z) | ((z) > (m)->hi_z))
+
+/* Receiver i moved (Move), rounded to float32 in *px, *py, *pz: FAR beyond the near box, else 3 when it
+ * is not finite (NaN: never beyond), else WALK. */
+INLINE int receiver_point(int i, __global const input_t *points, const Move *m, float *px, float *py, float *pz)
 {
-    const float x = (float)FRAME_MOVE(points[3 * i], cx, inv_scale, ox),
-                y = (float)FRAME_MOVE(points[3 * i + 1], cy, inv_scale, oy),
-                z = (float)FRAME_MOVE(points[3 * i + 2], cz, inv_scale, oz);
-    *px = x; *py = y; *pz = z;
-    return (SC_FINITE(x) & SC_FINITE(y) & SC_FINITE(z)) ? WALK : 3;
+    const input_t x = FRAME_MOVE(points[3 * i], m->cx, m->inv_scale, m->ox),
+                  y = FRAME_MOVE(points[3 * i + 1], m->cy, m->inv_scale, m->oy),
+                  z = FRAME_MOVE(points[3 * i + 2], m->cz, m->inv_scale, m->oz);
+    *px = (float)x; *py = (float)y; *pz = (float)z;
+    if (BEYOND(m, x, y, z))
+        return FAR;
+    return (SC_FINITE(*px) & SC_FINITE(*py) & SC_FINITE(*pz)) ? WALK : 3;
 }
 
 /* Receiver i's normal in float32, not yet unit: rescaled in the input precision first when its squared
@@ -119,18 +137,17 @@ INLINE void to_light(lfloat sx, lfloat sy, lfloat sz, float lx, float ly, float 
 }
 
 /* The lanes' receivers base + j (lanes past n repeat receiver n - 1), one lane at a time: their points
- * (receiver_point) and, with normals, normals (receiver_normal; 1 where the point is not finite) in
- * the lanes, and their codes (WALK, 3, 4). */
+ * (receiver_point) and, with normals, normals (receiver_normal; 1 where the point is not walked) in
+ * the lanes, and their codes (WALK, 3, 4, FAR). */
 INLINE lint receivers_load_lanes(int base, int n, __global const input_t *points, __global const input_t *normals,
-                                 input_t cx, input_t cy, input_t cz, input_t inv_scale, input_t ox, input_t oy,
-                                 input_t oz, int with_normals, lfloat *sx, lfloat *sy, lfloat *sz, lfloat *nx,
+                                 const Move *m, int with_normals, lfloat *sx, lfloat *sy, lfloat *sz, lfloat *nx,
                                  lfloat *ny, lfloat *nz)
 {
     float px[LANES], py[LANES], pz[LANES], mx[LANES], my[LANES], mz[LANES];
     int code[LANES];
     for (int j = 0; j < LANES; ++j) {
         const int i = SC_IMIN(base + j, n - 1);
-        code[j] = receiver_point(i, points, cx, cy, cz, inv_scale, ox, oy, oz, &px[j], &py[j], &pz[j]);
+        code[j] = receiver_point(i, points, m, &px[j], &py[j], &pz[j]);
         mx[j] = my[j] = mz[j] = 1.0f;
         if (with_normals && code[j] == WALK)
             code[j] = receiver_normal(i, normals, &mx[j], &my[j], &mz[j]);
@@ -162,16 +179,18 @@ INLINE void load_rows8(__global const input_t *array, int r, input8 *x, input8 *
  * and the rounding over lanes): the same bits. Returns 0 (and nothing is to be used) when a normal
  * needs receiver_normal's rescaling or is bad, which receivers_load_lanes handles. */
 INLINE int receivers_load_rows(int base, __global const input_t *points, __global const input_t *normals,
-                               input_t cx, input_t cy, input_t cz, input_t inv_scale, input_t ox, input_t oy,
-                               input_t oz, int with_normals, lfloat *sx, lfloat *sy, lfloat *sz, lfloat *nx,
+                               const Move *m, int with_normals, lfloat *sx, lfloat *sy, lfloat *sz, lfloat *nx,
                                lfloat *ny, lfloat *nz, lint *codes)
 {
     input8 x, y, z;
     load_rows8(points, base, &x, &y, &z);
-    *sx = __builtin_convertvector(FRAME_MOVE(x, cx, inv_scale, ox), lfloat);
-    *sy = __builtin_convertvector(FRAME_MOVE(y, cy, inv_scale, oy), lfloat);
-    *sz = __builtin_convertvector(FRAME_MOVE(z, cz, inv_scale, oz), lfloat);
-    *codes = (SC_FINITE(*sx) & SC_FINITE(*sy) & SC_FINITE(*sz)) ? (lint)WALK : (lint)3;
+    x = FRAME_MOVE(x, m->cx, m->inv_scale, m->ox);
+    y = FRAME_MOVE(y, m->cy, m->inv_scale, m->oy);
+    z = FRAME_MOVE(z, m->cz, m->inv_scale, m->oz);
+    *sx = __builtin_convertvector(x, lfloat); *sy = __builtin_convertvector(y, lfloat);
+    *sz = __builtin_convertvector(z, lfloat);
+    const lint beyond = __builtin_convertvector(BEYOND(m, x, y, z), lint);
+    *codes = beyond ? (lint)FAR : (SC_FINITE(*sx) & SC_FINITE(*sy) & SC_FINITE(*sz)) ? (lint)WALK : (lint)3;
     *nx = *ny = *nz = (lfloat)1.0f;
     if (with_normals) {
         load_rows8(normals, base, &x, &y, &z);
@@ -186,22 +205,20 @@ INLINE int receivers_load_rows(int base, __global const input_t *points, __globa
 #endif
 
 /* The lanes' receivers base + j (lanes past n repeat receiver n - 1): their codes (WALK, or 1 for a
- * normal facing away from the light, 3, 4: see the top) and the starts s of those to walk, s = p + eps n
- * with n made unit (p without normals). Whole packets of 8 load their rows as vectors; the rest, and a
- * packet with a normal to rescale, one receiver at a time. The arithmetic is over lanes. */
+ * normal facing away from the light, 3, 4, FAR: see the top) and the starts s of those to walk, s = p +
+ * eps n with n made unit (p without normals). Whole packets of 8 load their rows as vectors; the rest,
+ * and a packet with a normal to rescale, one receiver at a time. The arithmetic is over lanes. */
 INLINE lint receivers_start(int base, int n, __global const input_t *points, __global const input_t *normals,
-                            input_t cx, input_t cy, input_t cz, input_t inv_scale, input_t ox, input_t oy, input_t oz,
-                            float lx, float ly, float lz, float eps, int with_normals, lfloat *psx, lfloat *psy,
-                            lfloat *psz)
+                            const Move *m, float lx, float ly, float lz, float eps, int with_normals, lfloat *psx,
+                            lfloat *psy, lfloat *psz)
 {
     lfloat sx, sy, sz, nx, ny, nz;
     lint codes;
 #if WHOLE_PACKETS
-    if (!(base + LANES <= n && receivers_load_rows(base, points, normals, cx, cy, cz, inv_scale, ox, oy, oz,
-                                                   with_normals, &sx, &sy, &sz, &nx, &ny, &nz, &codes)))
+    if (!(base + LANES <= n && receivers_load_rows(base, points, normals, m, with_normals, &sx, &sy, &sz, &nx, &ny,
+                                                   &nz, &codes)))
 #endif
-        codes = receivers_load_lanes(base, n, points, normals, cx, cy, cz, inv_scale, ox, oy, oz, with_normals, &sx,
-                                     &sy, &sz, &nx, &ny, &nz);
+        codes = receivers_load_lanes(base, n, points, normals, m, with_normals, &sx, &sy, &sz, &nx, &ny, &nz);
     if (with_normals) {
         const lfloat inv = 1.0f / LANE_SQRT(nx * nx + ny * ny + nz * nz);
         nx *= inv; ny *= inv; nz *= inv;
@@ -289,23 +306,20 @@ INLINE void load_starts8(__global const Start *start, lfloat *x, lfloat *y, lflo
 #endif
 
 #define BIN_ARGS                                                                                     \
-    __global const input_t *points, __global const input_t *normals, int n, input_t cx, input_t cy,  \
-        input_t cz, input_t inv_scale, input_t ox, input_t oy, input_t oz, __constant const float *views, \
-        int brute_cell, float lx, float ly, float lz, float eps, int with_normals
-
-#define BIN_ARG_NAMES points, normals, n, cx, cy, cz, inv_scale, ox, oy, oz, views, brute_cell, lx, ly, lz, eps, with_normals
+    __global const input_t *points, __global const input_t *normals, int n, MOVE_ARGS,                \
+        __constant const float *views, int brute_cell, float lx, float ly, float lz, float eps, int with_normals
 
 /* Pass 1's work on the packet of receivers base .. base + LANES - 1 (those below n): out[i] (the code of
  * a receiver needing no walk, else 0) and start[i] (its start and cell, -1 when it needs no walk)
  * written, the cells in cell[]. Contract: points (n x 3, float32 relative to the local origin, or float64
- * with INPUT_F64, the frame's move in (cx, cy, cz, inv_scale) and the origin in (ox, oy, oz)), normals
- * likewise if with_normals (any non-zero length); views: the grid the lists were built on; start: 32-byte
- * aligned. */
-INLINE void bin_packet(int base, BIN_ARGS, __global uchar *out, __global Start *start, int *cell)
+ * with INPUT_F64, the frame's move and the origin in m), normals likewise if with_normals (any non-zero
+ * length); views: the grid the lists were built on; start: 32-byte aligned. */
+INLINE void bin_packet(int base, __global const input_t *points, __global const input_t *normals, int n,
+                       const Move *m, __constant const float *views, int brute_cell, float lx, float ly, float lz,
+                       float eps, int with_normals, __global uchar *out, __global Start *start, int *cell)
 {
     lfloat sx, sy, sz;
-    const lint codes = receivers_start(base, n, points, normals, cx, cy, cz, inv_scale, ox, oy, oz, lx, ly, lz, eps,
-                                       with_normals, &sx, &sy, &sz);
+    const lint codes = receivers_start(base, n, points, normals, m, lx, ly, lz, eps, with_normals, &sx, &sy, &sz);
     lint coarse, sub;
     const lint cells = (codes == WALK) ? receiver_cell(views, brute_cell, sx, sy, sz, &coarse, &sub) : (lint)-1;
     LANE_STORE(cells, cell);
@@ -351,8 +365,9 @@ __kernel void exact_bin_count(BIN_ARGS, __global int *counts, __global int *slot
     const int base = LANES * get_global_id(0);
     if (base >= n)
         return;
+    const Move m = MOVE_OF_ARGS;
     int cell[LANES];
-    bin_packet(base, BIN_ARG_NAMES, out, start, cell);
+    bin_packet(base, points, normals, n, &m, views, brute_cell, lx, ly, lz, eps, with_normals, out, start, cell);
     for (int j = 0; j < LANES && base + j < n; ++j)
         slot[base + j] = (cell[j] >= 0) ? atomic_inc(&counts[cell[j]]) : -1;
 }
@@ -363,9 +378,10 @@ __kernel void exact_bin_count_ends(BIN_ARGS, int per_end, __global int *counts, 
     const int end = get_global_id(0), spare = brute_cell + 1;
     const int last = SC_IMIN(n, (end + 1) * per_end * LANES);
     __global int *row = counts + end * (brute_cell + 2);
+    const Move m = MOVE_OF_ARGS;
     for (int base = end * per_end * LANES; base < last; base += LANES) {
         int cell[LANES];
-        bin_packet(base, BIN_ARG_NAMES, out, start, cell);
+        bin_packet(base, points, normals, n, &m, views, brute_cell, lx, ly, lz, eps, with_normals, out, start, cell);
         for (int j = 0; j < LANES && base + j < n; ++j)
             ++row[cell[j] >= 0 ? cell[j] : spare];
     }
@@ -622,8 +638,8 @@ __kernel void exact_classify_points(BIN_ARGS, __global const float *tris, int nt
     if (i >= n)
         return;
     float sx, sy, sz;
-    const int code = receivers_start(i, n, points, normals, cx, cy, cz, inv_scale, ox, oy, oz, lx, ly, lz, eps,
-                                     with_normals, &sx, &sy, &sz);
+    const Move m = MOVE_OF_ARGS;
+    const int code = receivers_start(i, n, points, normals, &m, lx, ly, lz, eps, with_normals, &sx, &sy, &sz);
     if (code != WALK) {
         out[i] = (uchar)code;
         return;

@@ -185,7 +185,7 @@ def test_receiver_binning_that_drops_receivers_raises(device, monkeypatch, both_
     one per cell, so that every cell holding several receivers overflows (from either end)."""
     mesh, points, normals = random_scene(7, True)
     real = type(device).kernel
-    counts_at = {"exact_bin_count": 17, "exact_bin_count_ends": 18}    # after the 17 BIN_ARGS (and per_end)
+    counts_at = {"exact_bin_count": 23, "exact_bin_count_ends": 24}    # after the 23 BIN_ARGS (and per_end)
 
     def cut_counts(self, filename, name, options=()):
         kernel = real(self, filename, name, options)

@@ -335,3 +335,51 @@ def test_bounds_of_many_points_are_reduced_in_parts_alike():
     points[len(points) - 5, 2] = np.inf
     with pytest.raises(ValueError, match=rf"points: contains NaN or inf \(first at index {len(points) - 5}\)"):
         check_points(points)
+
+
+def test_one_shot_exact_reads_the_points_on_the_device_only(device, rng, monkeypatch):
+    """shadow_mask's exact call on a device with doubles makes no host pass over the points (no box, no
+    finiteness check: the device reads them first), and answers as the structure prepared for their box,
+    with receivers beyond the occluders' near box (answered on the host by clipping) among them."""
+    from shadowcl.exact import ExactMethod
+    assert ExactMethod.checks_receivers_on(device), "PoCL's CPU device has doubles: this path is the one tested"
+    scene = sc.Scene.load(SCENES / "default.toml")
+    points, normals = scene_receivers(scene, 6000, rng)
+    diagonal = float(np.linalg.norm(scene.bounds[1] - scene.bounds[0]))
+    points[::50] += rng.normal(size=(120, 3)) * 3 * diagonal          # beyond NEAR: far receivers
+    reductions = []
+    real = points_module._bounds
+    monkeypatch.setattr(points_module, "_bounds", lambda p: reductions.append(len(p)) or real(p))
+    for with_normals in (normals, None):
+        reductions.clear()
+        one_shot = sc.shadow_mask(scene, scene.light, points[1::50], with_normals[1::50] if with_normals is not None
+                                  else None, device=device)
+        assert len(points[1::50]) not in reductions       # near receivers only: their box never computed
+        mixed = sc.shadow_mask(scene, scene.light, points, with_normals, device=device)
+        assert len(points) in reductions                  # the far ones sent the host check over them all
+        prepared = sc.prepare(scene, scene.light, bounds=box_of(points), device=device).mask(points, with_normals)
+        assert np.array_equal(mixed, prepared) and 0.1 < mixed.mean() < 0.9
+        assert np.array_equal(one_shot, prepared[1::50])
+
+
+@pytest.mark.parametrize("value, column, match", [
+    (np.nan, 0, r"points: contains NaN or inf \(first at index 17\)"),
+    (-np.inf, 2, r"points: contains NaN or inf \(first at index 17\)"),
+    (1e39, 1, r"points: coordinates overflow float32"),
+    (1e30, 1, r"points: 1 receiver\(s\) lie more than .* \(first at index 17"),
+])
+def test_one_shot_exact_names_a_bad_point_as_the_host_check(device, rng, value, column, match):
+    """The device codes a point it cannot walk (not finite, beyond the near box); the host's own check
+    then names it, with the caller's index, as a prepared structure's query does."""
+    scene = sc.Scene.load(SCENES / "default.toml")
+    points, normals = scene_receivers(scene, 300, rng)
+    points[17, column] = value
+    prepared = sc.prepare(scene, scene.light, device=device)
+    for call in (lambda: sc.shadow_mask(scene, scene.light, points, normals, device=device),
+                 lambda: prepared.mask(points, normals)):
+        with pytest.raises(ValueError, match=match):
+            call()
+    normals[40] = 0.0
+    points[17, column] = 0.0
+    with pytest.raises(ValueError, match=r"normals: zero-length normal at index 40"):
+        sc.shadow_mask(scene, scene.light, points, normals, device=device)

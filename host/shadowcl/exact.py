@@ -133,6 +133,7 @@ TESTS = ("watertight", "dot5")
 LISTS = ("csr", "linked")
 ORDERS = ("cells", "caller")
 BIN_LANES = 8             # receivers per packet in 'cells' order (kernels/vecmath.h LANES)
+FAR = 5                   # the code of a point beyond the near box (kernels/exact.cl)
 DOT5_FLOATS = 16          # kernels/ray_triangle.h
 WT_FLOATS = 16
 SPLIT_PER_COARSE_CELL = 8.0   # coarse entries per coarse cell above which large triangles are split
@@ -235,6 +236,11 @@ class ExactMethod(Method):
         self._fp64 = "cl_khr_fp64" in device.cl_device.extensions
         self._both_ends = bins_from_both_ends(device.cl_device)
         self._prepared = False
+
+    @classmethod
+    def checks_receivers_on(cls, device) -> bool:
+        """With doubles the points' first read is on the device (the frame's move), which checks them."""
+        return "cl_khr_fp64" in device.cl_device.extensions
 
     # prepare -------------------------------------------------------------------------------------------
     def prepare(self, mesh: Mesh, light, receiver_bounds, eps: float) -> None:
@@ -407,36 +413,58 @@ class ExactMethod(Method):
         a single perspective view (only possible outside the prepared bounds) is tested against every
         triangle instead. Receivers are checked by :func:`shadowcl.points.check_points`.
         """
+        return self._classify(check_points(points, normals), None)[0]
+
+    def classify_near(self, points, near_box: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`shadowcl.methods.Method.classify_near`: the points' values are read first on the device,
+        which codes a point beyond ``near_box`` FAR (5: not walked) and a non-finite one 3 (kernels/exact.cl
+        receiver_point); only then does the host read them, to raise its check's error."""
+        if not self.checks_receivers:
+            raise RuntimeError("classify_near: this device has no doubles, the points are moved on the host")
+        return self._classify(check_points(points, box=False), np.asarray(near_box, dtype=np.float64))
+
+    def _classify(self, receivers, near_box: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """The mask and the indices of the points coded FAR (beyond ``near_box``; None: none is)."""
         if not self._prepared:
             raise RuntimeError("classify: call prepare(mesh, light, receiver_bounds, eps) first")
         t0 = time.perf_counter()
-        receivers = check_points(points, normals)
         if self._fp64 and isinstance(receivers, MovedPoints):
             # the frame's move fused into the first pass (kernels/exact.cl receiver_point): no host pass
             points, move = receivers.world.positions, (*receivers.centre, 1.0 / receivers.scale)
         else:
             points, move = receivers.positions, (0.0, 0.0, 0.0, 1.0)
         normals = receivers.normals if self._fp64 else receivers.unit_normals()
+        # the near box in the kernel's coordinates (the move's, relative to the origin): monotonic, so a
+        # point is beyond it there exactly when it is beyond near_box
+        near = np.array([[-np.inf] * 3, [np.inf] * 3]) if near_box is None else near_box - self.origin
         n = len(points)
         out = np.empty(n, dtype=np.uint8)
         brute = 0
         for lo in range(0, n, self.chunk):
             hi = min(n, lo + self.chunk)
-            out[lo:hi], behind = self._run(points[lo:hi], None if normals is None else normals[lo:hi], move)
+            out[lo:hi], behind = self._run(points[lo:hi], None if normals is None else normals[lo:hi], move, near)
             brute += behind
+        far = np.zeros(0, dtype=np.int64)
         if n and out.max() > 1:     # one pass over the codes; the search only when one is bad
-            bad = np.flatnonzero(out == 3)
-            if len(bad):   # finite, but beyond float32 once moved into the local frame
-                raise ValueError(f"points: overflow float32 relative to the occluders (first at index {int(bad[0])})")
-            receivers.checked_normals()          # raises the check's own error for the bad row (code 4)
-            raise RuntimeError("exact: the device refused normals the host check accepts (a bug)")
+            bad = np.flatnonzero((out == 3) | (out == 4))
+            if len(bad):
+                receivers.bounds                     # the host check of the values: raises its own error
+                overflow = bad[out[bad] == 3]        # finite, but beyond float32 once moved into the local frame
+                if len(overflow):
+                    raise ValueError(f"points: overflow float32 relative to the occluders (first at index {int(overflow[0])})")
+                receivers.checked_normals()          # raises the check's own error for the bad row (code 4)
+                raise RuntimeError("exact: the device refused normals the host check accepts (a bug)")
+            far = np.flatnonzero(out == FAR)
+            out[far] = 0
         self.stats.update(classify_s=time.perf_counter() - t0, receivers=n, brute_fallback=brute)
-        return out.view(bool)
+        return out.view(bool), far
 
-    def _run(self, points: np.ndarray, normals: np.ndarray | None, move: tuple) -> tuple[np.ndarray, int]:
-        """Codes (0 lit, 1 shadow, 3 bad point, 4 bad normal) of one chunk, and how many of its points
-        were tested against every triangle (behind a single perspective view). ``move``: (cx, cy, cz,
-        1 / scale) of the frame the points are still to be moved into (float64 input only)."""
+    def _run(self, points: np.ndarray, normals: np.ndarray | None, move: tuple,
+             near: np.ndarray) -> tuple[np.ndarray, int]:
+        """Codes (0 lit, 1 shadow, 3 bad point, 4 bad normal, FAR beyond ``near``) of one chunk, and how
+        many of its points were tested against every triangle (behind a single perspective view).
+        ``move``: (cx, cy, cz, 1 / scale) of the frame the points are still to be moved into (float64
+        input only); ``near``: (2, 3) box relative to the origin."""
         dev, queue = self.device, self.device.queue
         n = len(points)
         if n == 0:
@@ -444,11 +472,11 @@ class ExactMethod(Method):
         if self._fp64:
             # float64 in; the kernel moves the points, subtracts the origin in double and rounds, as the
             # host would
-            origin = [np.float64(c) for c in (*move, *self.origin)]
+            origin = [np.float64(c) for c in (*move, *self.origin, *near.ravel())]
             points_dev = dev.input_view(points)
             normals_dev = dev.input_view(normals) if normals is not None else points_dev
         else:
-            origin = [np.float32(c) for c in (0, 0, 0, 1, 0, 0, 0)]
+            origin = [np.float32(c) for c in (0, 0, 0, 1, 0, 0, 0, *near.ravel())]
             points_dev = dev.input_view(np.subtract(points, self.origin).astype(np.float32))
             normals_dev = points_dev if normals is None else dev.input_view(normals.astype(np.float32))
         binned = self.order == "cells"

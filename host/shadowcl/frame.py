@@ -74,10 +74,14 @@ class Frame:
         matrix = view.matrix @ np.diag([self.scale, self.scale, self.scale, 1.0])
         return dataclasses.replace(view, origin=self.points(view.origin), matrix=matrix)
 
-    def receivers(self, receivers: Points) -> Points:
-        """``receivers`` in the frame; ``ValueError`` naming the first beyond :data:`MAX_RECEIVER_DISTANCE`."""
+    def receivers(self, receivers: Points, range_checked_later: bool = False) -> Points:
+        """``receivers`` in the frame; ``ValueError`` naming the first beyond :data:`MAX_RECEIVER_DISTANCE`.
+        ``range_checked_later``: the caller has every receiver beyond the occluders' near box flagged on
+        the device and runs this check on them then (the box is not computed here)."""
         if len(receivers) == 0:
             return receivers
+        if range_checked_later:
+            return MovedPoints(receivers, self.centre, self.scale, None)
         limit = MAX_RECEIVER_DISTANCE * self.extent
         if np.abs(receivers.bounds - self.centre).max() > limit:
             far = np.abs(receivers.positions - self.centre).max(axis=1) > limit

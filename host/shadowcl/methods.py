@@ -40,6 +40,10 @@ Optional capabilities are declared on the class, never found by ``hasattr``:
 - ``answers_at_the_light``: the method itself answers a receiver whose tested segment is at most ``eps``
   long (lit, unless its normal faces away), whatever its projection makes of a point at its eye; else
   :class:`shadowcl.Shadows` finds such receivers on the host and sets them.
+- ``checks_receivers`` (the instance's, for its device: :meth:`~Method.checks_receivers_on`):
+  :meth:`~Method.classify_near` checks the
+  points' values in the method's first pass over them and leaves those beyond a given box to the caller,
+  so that ``shadow_mask``'s one-shot call makes no host pass over the points (no box, no finiteness check).
 """
 
 from __future__ import annotations
@@ -86,6 +90,7 @@ class Method(abc.ABC):
     def __init__(self, device, **params):
         self.check_parameter_names(params)
         self.device = device
+        self.checks_receivers = self.checks_receivers_on(device)
         self.params = {key: params.get(key, default) for key, (default, _) in self.parameters.items()}
         self.stats: dict = {}
 
@@ -107,6 +112,18 @@ class Method(abc.ABC):
     @abc.abstractmethod
     def classify(self, points, normals=None) -> np.ndarray:
         """bool (N,): True = in shadow."""
+
+    @classmethod
+    def checks_receivers_on(cls, device) -> bool:
+        """Whether the method on ``device`` (a :class:`shadowcl.Device`) has ``checks_receivers``."""
+        return False
+
+    def classify_near(self, points, near_box: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``checks_receivers`` methods: ``classify`` of the checked-shape ``points`` (a
+        :class:`~shadowcl.points.Points` whose values the host has not read), except the points beyond
+        the (2, 3) box ``near_box`` (the method's frame), which are left False and returned as indices
+        for the caller to answer. A bad value raises the host check's own error."""
+        raise NotImplementedError(f"method {self.name!r} does not check receivers on the device")
 
     def visibility(self, points, normals=None) -> np.ndarray:
         """float32 (N,) in [0, 1], 1 = lit: binary methods give 0 or 1 (this default), filtering ones

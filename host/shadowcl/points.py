@@ -12,7 +12,10 @@ read as "facing away".
 
 Cheap by construction, since it runs on every public call. The points are checked at once: the bounds
 come from wide reductions (:func:`_bounds`), and finiteness is read off them (NaN propagates through
-``min``, inf is a bound). The normals' values are checked where they are first used, once:
+``min``, inf is a bound). ``check_points(..., box=False)`` defers that pass to the first read of
+:attr:`Points.bounds`, which then raises the same errors: for a method that checks the values on the
+device in its own first pass over them (the exact method in ``shadow_mask``'s one-shot call, which never
+reads the box). The normals' values are checked where they are first used, once:
 :meth:`Points.checked_normals` (and :meth:`~Points.unit_normals`, :meth:`~Points.facing_away` over it)
 on the host, or on the device by a method that normalises them there in double (the exact method),
 which reports a bad row through :meth:`Points.checked_normals` so that the error is the same. The slow
@@ -42,16 +45,23 @@ class Points:
     """Receivers that passed :func:`check_points`.
 
     ``positions`` (N, 3) float64 C-contiguous; ``normals`` None or (N, 3) float64 C-contiguous, as given
-    (their values checked on first use, see the module docstring); ``bounds`` the (2, 3) box of the
-    positions (zeros when N = 0).
+    (their values checked on first use, see the module docstring); ``box`` the (2, 3) box of the
+    positions (zeros when N = 0), or None when it is still to be computed (``check_points(..., box=False)``:
+    the positions' values are then unchecked until :attr:`bounds` is read).
     """
 
     positions: np.ndarray
     normals: np.ndarray | None
-    bounds: np.ndarray
+    box: np.ndarray | None
 
     def __len__(self) -> int:
         return len(self.positions)
+
+    @cached_property
+    def bounds(self) -> np.ndarray:
+        """The (2, 3) box of the positions; computed on first read when it was deferred, with the check of
+        their values (``ValueError`` naming the first bad index)."""
+        return self.box if self.box is not None else _checked_bounds(self.positions)
 
     def checked_normals(self) -> np.ndarray | None:
         """The normals once checked on the host (finite, non-zero; rescaled where their squared length
@@ -113,10 +123,15 @@ class MovedPoints(Points):
     the host move: ``(x - centre) * (1 / scale)`` in float64.
     """
 
-    def __init__(self, world: Points, centre: np.ndarray, scale: float, bounds: np.ndarray):
+    def __init__(self, world: Points, centre: np.ndarray, scale: float, bounds: np.ndarray | None):
         for name, value in (("world", world), ("centre", np.asarray(centre, dtype=np.float64)),
-                            ("scale", float(scale)), ("normals", world.normals), ("bounds", bounds)):
+                            ("scale", float(scale)), ("normals", world.normals), ("box", bounds)):
             object.__setattr__(self, name, value)
+
+    @cached_property
+    def bounds(self) -> np.ndarray:
+        """The moved box: given, or the world's box moved when first read (the move is monotonic)."""
+        return self.box if self.box is not None else self._move(self.world.bounds)
 
     @cached_property
     def positions(self) -> np.ndarray:
@@ -145,29 +160,35 @@ class MovedPoints(Points):
         return candidates[np.all(np.abs(moved - point) <= reach, axis=1)]
 
 
-def check_points(points, normals=None) -> Points:
+def check_points(points, normals=None, box: bool = True) -> Points:
     """``points`` (N, 3) and optional ``normals`` (N, 3) checked once (module docstring), as :class:`Points`.
 
     A :class:`Points` is returned as it is (``normals`` must then be None). Raises ``TypeError`` for
-    non-numeric input and ``ValueError`` naming the argument and the first bad index otherwise.
+    non-numeric input and ``ValueError`` naming the argument and the first bad index otherwise; with
+    ``box=False`` the values (not the shapes) are checked when :attr:`Points.bounds` is first read.
     """
     if isinstance(points, Points):
         if normals is not None:
             raise TypeError("normals: the points are checked Points already, which carry their own normals")
         return points
     positions = _real_array("points", points)
+    bounds = _checked_bounds(positions) if box else None
+    if normals is not None:
+        normals = _real_array("normals", normals)
+        if normals.shape != positions.shape:
+            raise ValueError(f"normals: expected shape {positions.shape} to match points, got {normals.shape}")
+    return Points(positions, normals, bounds)
+
+
+def _checked_bounds(positions: np.ndarray) -> np.ndarray:
+    """The box of (N, 3) float64 ``positions``; ``ValueError`` for a value outside the contract."""
     bounds = _bounds(positions)
     if not np.all(np.isfinite(bounds)):
         raise ValueError(f"points: contains NaN or inf (first at index {_first_bad_row(positions)})")
     largest = float(np.abs(bounds).max(initial=0.0))
     if largest >= FLOAT32_MAX:
         raise ValueError(f"points: coordinates overflow float32 (largest magnitude {largest:.3g})")
-    if normals is None:
-        return Points(positions, None, bounds)
-    normals = _real_array("normals", normals)
-    if normals.shape != positions.shape:
-        raise ValueError(f"normals: expected shape {positions.shape} to match points, got {normals.shape}")
-    return Points(positions, normals, bounds)
+    return bounds
 
 
 def _real_array(name: str, value) -> np.ndarray:
