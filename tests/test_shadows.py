@@ -383,3 +383,21 @@ def test_one_shot_exact_names_a_bad_point_as_the_host_check(device, rng, value, 
     points[17, column] = 0.0
     with pytest.raises(ValueError, match=r"normals: zero-length normal at index 40"):
         sc.shadow_mask(scene, scene.light, points, normals, device=device)
+
+
+def test_one_shot_exact_fits_the_points_where_a_single_view_would_miss_them(device, rng, monkeypatch):
+    """A point light outside the occluders' box sees them in one perspective view, behind which a point
+    would be tested against every triangle: shadow_mask then fits the structure to the points' box (a
+    cube of views round the light), as before, and reads their box on the host."""
+    from shadowcl.testing import icosphere
+    mesh, light = icosphere(3), sc.PointLight((0.1, 3.0, 0.2))
+    points = np.concatenate([rng.uniform(-3, 3, (2000, 3)) * [1, 0, 1] + [0, 3.8, 0],      # behind the light
+                             rng.uniform(-3, 3, (2000, 3)) * [1, 0, 1] + [0, -1.5, 0]])    # under the sphere
+    reductions = []
+    real = points_module._bounds
+    monkeypatch.setattr(points_module, "_bounds", lambda p: reductions.append(len(p)) or real(p))
+    mask = sc.shadow_mask(mesh, light, points, device=device)
+    assert len(points) in reductions
+    prepared = sc.prepare(mesh, light, bounds=box_of(points), device=device)
+    assert np.array_equal(mask, prepared.mask(points)) and prepared.stats["brute_fallback"] == 0
+    assert not mask[:2000].any() and 0.05 < mask[2000:].mean() < 0.95

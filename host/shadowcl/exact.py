@@ -242,6 +242,15 @@ class ExactMethod(Method):
         """With doubles the points' first read is on the device (the frame's move), which checks them."""
         return "cl_khr_fp64" in device.cl_device.extensions
 
+    @classmethod
+    def places_any_point(cls, light, occluder_bounds: np.ndarray) -> bool:
+        """Unless the views fitted to the box are a single perspective view: a point behind it (possible
+        only outside the box) is tested against every triangle. Decided in the world, prepare decides in
+        its frame: the two can differ only for a light within 1e-6 of the box or of the widest view."""
+        centre = 0.5 * (occluder_bounds[0] + occluder_bounds[1])
+        views = lightspace.fit_views(light, occluder_bounds, centre, bounds_diagonal(occluder_bounds))
+        return views.kind != "perspective"
+
     # prepare -------------------------------------------------------------------------------------------
     def prepare(self, mesh: Mesh, light, receiver_bounds, eps: float) -> None:
         """Build the light-space lists of ``mesh`` seen from ``light`` for receivers in ``receiver_bounds``.

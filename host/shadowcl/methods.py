@@ -118,6 +118,13 @@ class Method(abc.ABC):
         """Whether the method on ``device`` (a :class:`shadowcl.Device`) has ``checks_receivers``."""
         return False
 
+    @classmethod
+    def places_any_point(cls, light, occluder_bounds: np.ndarray) -> bool:
+        """Whether a structure prepared for the (world) box ``occluder_bounds`` answers a point anywhere
+        (near) as cheaply as one prepared for the points' box: ``shadow_mask`` may then fit a
+        ``checks_receivers`` method to the occluders and never read the points on the host."""
+        return False
+
     def classify_near(self, points, near_box: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``checks_receivers`` methods: ``classify`` of the checked-shape ``points`` (a
         :class:`~shadowcl.points.Points` whose values the host has not read), except the points beyond

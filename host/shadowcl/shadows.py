@@ -400,10 +400,11 @@ def shadow_mask(scene_or_mesh, light, points, normals=None, method: str = "exact
 
 def _fits_to_occluders(scene_or_mesh, light, method: str, device) -> bool:
     """Whether ``shadow_mask`` can fit ``method``'s structure to the occluders' box rather than the points':
-    the method checks the points on the device (their box is then never computed) and answers every
-    point the same whatever box it was fitted to, which holds unless a point light is so distant that
-    the box decides where it is taken as directional (:meth:`Shadows._fit`)."""
+    the method checks the points on the device (their box is then never computed), answers every point
+    the same whatever box it was fitted to (unless a point light is so distant that the box decides where
+    it is taken as directional: :meth:`Shadows._fit`), and places any point as cheaply."""
     cls = method_class(method)
     if not cls.checks_receivers_on(get_device(device)) or cls.bounded:
         return False
-    return not is_distant(check_light(light), as_mesh(scene_or_mesh).bounds, cls.point_light_reach)
+    light, box = check_light(light), as_mesh(scene_or_mesh).bounds
+    return not is_distant(light, box, cls.point_light_reach) and cls.places_any_point(light, box)
