@@ -41,9 +41,9 @@ Optional capabilities are declared on the class, never found by ``hasattr``:
   long (lit, unless its normal faces away), whatever its projection makes of a point at its eye; else
   :class:`shadowcl.Shadows` finds such receivers on the host and sets them.
 - ``checks_receivers`` (the instance's, for its device: :meth:`~Method.checks_receivers_on`):
-  :meth:`~Method.classify_near` checks the
-  points' values in the method's first pass over them and leaves those beyond a given box to the caller,
-  so that ``shadow_mask``'s one-shot call makes no host pass over the points (no box, no finiteness check).
+  :meth:`~Method.classify_near` checks the points' values in the method's first pass over them and
+  leaves those beyond a given box to the caller, so that ``shadow_mask``'s one-shot call makes no host
+  pass over the points (no box, no finiteness check), where :meth:`~Method.places_any_point` allows.
 """
 
 from __future__ import annotations

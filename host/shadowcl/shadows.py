@@ -145,16 +145,14 @@ class Shadows:
         (which then name any bad value with the caller's index). ``outside_bounds`` is not counted (None):
         that needs the receivers' box."""
         frame = self._frame
-        margin = NEAR * frame.extent + 3.0 * self.eps                 # as _far
-        near_box = frame.points(self._mesh.bounds + np.array([[-1.0], [1.0]]) * margin)
-        answer, far = self._instance.classify_near(frame.receivers(receivers, range_checked_later=True), near_box)
+        answer, far = self._instance.classify_near(frame.receivers(receivers, range_checked_later=True),
+                                                   frame.points(self._near_box()))
         checked = time.perf_counter()
-        outside = None
         if len(far):
             receivers.bounds, receivers.checked_normals()            # the host checks, with the caller's indices
-            answer[far], outside = self._answer_far("classify", self._frame.receivers(receivers).subset(far))
+            answer[far] = self._answer_far("classify", frame.receivers(receivers).subset(far))[0]
         self._check_s, self._classify_s = checked - start, time.perf_counter() - start
-        self._outside, self._receivers = outside, len(receivers)
+        self._outside, self._receivers = None, len(receivers)
         return answer
 
     def _answer(self, kind: str, world: Points, framed: Points) -> tuple[np.ndarray, int]:
@@ -301,10 +299,14 @@ class Shadows:
         return 2.0 * self.eps + CLIP_PAD * self._frame.extent
 
     def _far(self, receivers: Points) -> np.ndarray:
-        """Indices of the (world) receivers more than :data:`NEAR` occluder diagonals (plus 3 eps) outside
-        the occluders' box: their starts lie outside the box widened by :meth:`_clip_pad`."""
+        """Indices of the (world) receivers outside :meth:`_near_box`."""
+        return outside_box(receivers, *self._near_box())
+
+    def _near_box(self) -> np.ndarray:
+        """The occluders' box widened by :data:`NEAR` occluder diagonals (plus 3 eps), world: a receiver
+        beyond it is far, its start outside the box widened by :meth:`_clip_pad`."""
         margin = NEAR * self._frame.extent + 3.0 * self.eps
-        return outside_box(receivers, self._mesh.bounds[0] - margin, self._mesh.bounds[1] + margin)
+        return self._mesh.bounds + np.array([[-1.0], [1.0]]) * margin
 
     def _check_reach(self, receivers: Points) -> None:
         """A point light used as directional for ``bounds`` must stay distant for these receivers too (the
