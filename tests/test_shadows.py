@@ -385,6 +385,22 @@ def test_one_shot_exact_names_a_bad_point_as_the_host_check(device, rng, value, 
         sc.shadow_mask(scene, scene.light, points, normals, device=device)
 
 
+@pytest.mark.parametrize("method", TRIANGLE_METHODS)
+def test_a_bad_normal_among_far_receivers_is_named_by_its_index(device, rng, method):
+    """Far receivers are answered apart from the near ones: a bad normal in either part is still named by
+    its index in the caller's array (it was its index in the part)."""
+    scene = sc.Scene.load(SCENES / "default.toml")
+    points, normals = scene_receivers(scene, 300, rng)
+    points[::3] *= 50.0                                       # far: beyond NEAR occluder diagonals
+    for bad in (40, 41):                                      # a far one, a near one
+        zeroed = normals.copy()
+        zeroed[bad] = 0.0
+        for call in (lambda: sc.shadow_mask(scene, scene.light, points, zeroed, method=method, device=device),
+                     lambda: sc.prepare(scene, scene.light, method, device=device).mask(points, zeroed)):
+            with pytest.raises(ValueError, match=rf"normals: zero-length normal at index {bad}\b"):
+                call()
+
+
 def test_one_shot_exact_fits_the_points_where_a_single_view_would_miss_them(device, rng, monkeypatch):
     """A point light outside the occluders' box sees them in one perspective view, behind which a point
     would be tested against every triangle: shadow_mask then fits the structure to the points' box (a

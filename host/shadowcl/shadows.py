@@ -118,6 +118,7 @@ class Shadows:
         far = self._far(receivers)
         checked = time.perf_counter()
         if len(far):
+            receivers.checked_normals()     # a bad normal named by its index in the caller's array, not a part's
             near = np.ones(len(receivers), dtype=bool)
             near[far] = False
             answer = np.empty(len(receivers), dtype=ANSWER_DTYPES[kind])
