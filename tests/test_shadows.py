@@ -386,19 +386,27 @@ def test_one_shot_exact_names_a_bad_point_as_the_host_check(device, rng, value, 
 
 
 @pytest.mark.parametrize("method", TRIANGLE_METHODS)
-def test_a_bad_normal_among_far_receivers_is_named_by_its_index(device, rng, method):
-    """Far receivers are answered apart from the near ones: a bad normal in either part is still named by
-    its index in the caller's array (it was its index in the part)."""
+def test_a_bad_normal_in_a_part_is_named_by_its_index(device, rng, method):
+    """Far receivers, and for a bounded method those outside its bounds, are answered apart from the
+    others: a bad normal in any part is still named by its index in the caller's array (it was its index
+    in the part)."""
     scene = sc.Scene.load(SCENES / "default.toml")
     points, normals = scene_receivers(scene, 300, rng)
-    points[::3] *= 50.0                                       # far: beyond NEAR occluder diagonals
-    for bad in (40, 41):                                      # a far one, a near one
+    low, high = scene.bounds
+    corner = np.stack([low, low + 0.4 * (high - low)])
+    outside = np.flatnonzero(np.any((points < corner[0]) | (points > corner[1]), axis=1))
+    inside = np.setdiff1d(np.arange(len(points)), outside)
+    far = points.copy()
+    far[::3] *= 50.0                                          # far: beyond NEAR occluder diagonals
+    calls = [lambda p, n: sc.shadow_mask(scene, scene.light, p, n, method=method, device=device),
+             lambda p, n: sc.prepare(scene, scene.light, method, device=device).mask(p, n),
+             lambda p, n: sc.prepare(scene, scene.light, method, bounds=corner, device=device).mask(p, n)]
+    for where, bad in ((far, 40), (far, 41), (points, outside[5]), (points, inside[5])):
         zeroed = normals.copy()
         zeroed[bad] = 0.0
-        for call in (lambda: sc.shadow_mask(scene, scene.light, points, zeroed, method=method, device=device),
-                     lambda: sc.prepare(scene, scene.light, method, device=device).mask(points, zeroed)):
+        for call in calls:
             with pytest.raises(ValueError, match=rf"normals: zero-length normal at index {bad}\b"):
-                call()
+                call(where, zeroed)
 
 
 def test_one_shot_exact_fits_the_points_where_a_single_view_would_miss_them(device, rng, monkeypatch):

@@ -162,6 +162,7 @@ class Shadows:
         outside = self._outside_bounds(world)
         if not (self._split and len(outside)):
             return getattr(self._instance, kind)(framed), len(outside)
+        world.checked_normals()             # a bad normal named by its index here, not in a part
         inside = np.ones(len(framed), dtype=bool)
         inside[outside] = False
         beyond = framed.subset(outside)
