@@ -150,7 +150,8 @@ class Shadows:
                                                    frame.points(self._near_box()))
         checked = time.perf_counter()
         if len(far):
-            receivers.bounds, receivers.checked_normals()            # the host checks, with the caller's indices
+            receivers.bounds                 # the host checks of the values, naming the caller's indices
+            receivers.checked_normals()
             answer[far] = self._answer_far("classify", frame.receivers(receivers).subset(far))[0]
         self._check_s, self._classify_s = checked - start, time.perf_counter() - start
         self._outside, self._receivers = None, len(receivers)
