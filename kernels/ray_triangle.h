@@ -208,30 +208,54 @@ INLINE lint wt_hit(const WtRay *r, float v0x, float v0y, float v0z, float v1x, f
     return hit;
 }
 
-/* Watertight triangle record (WT_FLOATS = 16 floats, one 64-byte line): the corners v0, v1, v2 as
- * stored (9), then for the plane cull the unit normal n (3), fL = n.(light - v0) for a point light or
- * n.(-direction) for a directional light, and its rounding bound eL (2), the relative bound rel of the
- * plane test (1: 1e-6 plus how far the computed normal may lean, large for slivers), 1 float of padding. */
-#define WT_FLOATS 16
+/* Watertight triangle record (WT_FLOATS = 32 floats, two 64-byte lines). The first line: the corners
+ * v0, v1, v2 as stored (9), then for the plane test the unit normal n (3), fL = n.(light - v0) for a
+ * point light or n.(-direction) for a directional light, and its rounding bound eL (2), the relative
+ * bound rel of the plane test (1: 1e-6 plus how far the computed normal may lean, large for slivers),
+ * 1 float of padding. The second line, for the cone test: the three edge planes m0, m1, m2 (9), through
+ * the light (point) or along its direction (directional), each oriented so that the triangle lies on
+ * its positive side; the rounding scale tau and offset sigma of their values (2); the planes' offsets
+ * w0, w1, w2 (3: m_k . v_k for a directional light, 0 for a point light); 2 floats of padding. */
+#define WT_FLOATS 32
 #define NORMAL_ULPS 8.0f   /* the cross product's rounding, in FLT_EPSILON, that the cull allows for */
 
-/* Plane cull: 1 when the tested part of the segment, from s + tmin d (a hit counts only beyond tmin) to
- * the light, certainly stays on one side of the triangle's plane (both ends farther than their rounding
- * bounds from it, on the same side), so no test can hit. A segment through a shared edge or vertex
- * crosses both planes there, so the cull never removes one; it only skips triangles the segment does
- * not reach. Starting at tmin rather than at s culls the plane a receiver lies on (a point on a face,
- * given without normals): measured on the default scene's ground, one-shot 101 -> ~60 ms. The bound
- * covers s - v0 (exact near v0) and the tmin d step with the record's relative bound. Degenerate
- * triangles (n = 0) are never culled (their test says no hit). */
-INLINE lint wt_culled(__global const float *t, lfloat sx, lfloat sy, lfloat sz, lfloat dx, lfloat dy, lfloat dz,
-                      lfloat tmin)
+/* Plane test: 1 where the tested part of the segment, from s + tmin d (a hit counts only beyond tmin)
+ * to the light, certainly stays on one side of the triangle's plane (both ends farther than their
+ * rounding bounds from it, on the same side), so no test can hit; in *crossing the lanes where it
+ * certainly crosses the plane (the ends certainly on opposite sides). A segment through a shared edge or
+ * vertex crosses both planes there, so the cull never removes one; it only skips triangles the segment
+ * does not reach. Starting at tmin rather than at s culls the plane a receiver lies on (a point on a
+ * face, given without normals): measured on the default scene's ground, one-shot 101 -> ~60 ms. The
+ * bound covers s - v0 (exact near v0) and the tmin d step with the record's relative bound. Degenerate
+ * triangles (n = 0) are neither culled nor crossed (their test says no hit). */
+INLINE lint wt_plane(__global const float *t, lfloat sx, lfloat sy, lfloat sz, lfloat dx, lfloat dy, lfloat dz,
+                     lfloat tmin, lint *crossing)
 {
     const lfloat a0 = (sx - t[0]) + tmin * dx, a1 = (sy - t[1]) + tmin * dy, a2 = (sz - t[2]) + tmin * dz;
     const lfloat fs = t[9] * a0 + t[10] * a1 + t[11] * a2;
     const lfloat es = t[14] * (SC_LABS(a0) + SC_LABS(a1) + SC_LABS(a2) +
                                tmin * (SC_LABS(dx) + SC_LABS(dy) + SC_LABS(dz)));
     const float fl = t[12], el = t[13];        /* the light's side: one per triangle */
-    return (fl > el) ? (fs > es) : ((fl < -el) ? (fs < -es) : (lint)0);
+    const lint above = fs > es, below = fs < -es;
+    *crossing = (fl > el) ? below : ((fl < -el) ? above : (lint)0);
+    return (fl > el) ? above : ((fl < -el) ? below : (lint)0);
+}
+
+/* Cone test: the lanes whose line to the light certainly misses the triangle (outside one of its edge
+ * planes by more than the rounding bound), and in *inside those whose line certainly passes through it
+ * (inside all three). The planes contain the light (point light: x = d = light - s, the values
+ * m_k . d up to sign) or its direction (directional: x = s, the values m_k . s - w_k); x_norm = |x|_1.
+ * With the plane test's crossing, inside is a hit, and outside is a miss: what the watertight test
+ * would say, decided without it, except near an edge or a vertex (within the bound), where neither is
+ * certain and the watertight test decides (wt_record's bound; the lanes on a shared edge go to it). */
+INLINE lint wt_cone(__global const float *t, lfloat x, lfloat y, lfloat z, lfloat x_norm, lint *inside)
+{
+    const lfloat bound = t[25] * x_norm + t[26];
+    const lfloat e0 = t[16] * x + t[17] * y + t[18] * z - t[27];
+    const lfloat e1 = t[19] * x + t[20] * y + t[21] * z - t[28];
+    const lfloat e2 = t[22] * x + t[23] * y + t[24] * z - t[29];
+    *inside = (e0 > bound) & (e1 > bound) & (e2 > bound);
+    return (e0 < -bound) | (e1 < -bound) | (e2 < -bound);
 }
 
 /* Dot5 triangle record: V0 (3), n = u x v (3), u (3), v (3), uu/den, uv/den, vv/den, pad (3): 16 floats.

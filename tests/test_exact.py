@@ -260,6 +260,57 @@ def test_no_leaks_on_exact_ties(device):
                 assert mask.all(), f"{test}: {int((~mask).sum())} leaks of {len(points)}"
 
 
+
+@pytest.mark.parametrize("light", [sc.PointLight((0.3, 10.0, 0.2)), sc.DirectionalLight((0.1, -1.0, 0.05))],
+                         ids=["point", "directional"])
+def test_a_hit_just_within_eps_does_not_count_where_the_plane_test_is_unsure(device, rng, light):
+    """Receivers under a ground plane whose segment meets it eps (1 +- 1e-3) from the start: in shadow
+    beyond eps, lit within it. The plane test cannot be sure of either (its bound, ~1e-6 of the
+    corners' distance, exceeds 1e-3 eps), while the line to the light certainly passes through a
+    triangle: the cone test alone must not call them hit (kernels/exact.cl packet_hits)."""
+    eps = 1e-3
+    plane = grid_plane(2, 4.0)
+    on_plane = np.column_stack([rng.uniform(-3, 3, 4000), np.zeros(4000), rng.uniform(-3, 3, 4000)])
+    if isinstance(light, sc.PointLight):
+        towards = light.position - on_plane
+        towards /= np.linalg.norm(towards, axis=1, keepdims=True)
+    else:
+        towards = np.tile(-light.direction, (len(on_plane), 1))
+    beyond = rng.random(len(on_plane)) < 0.5
+    reach = eps * np.where(beyond, 1 + 1e-3, 1 - 1e-3)          # from the start to the plane, along the ray
+    points = on_plane - reach[:, None] * towards
+    truth = ref.shadow_mask(plane.vertices, plane.faces, light, points, None, eps)
+    assert np.array_equal(truth, beyond)
+    mask, _ = classify(plane, light, points, eps=eps, device=device)
+    assert np.array_equal(mask, beyond), f"{int((mask != beyond).sum())} of {len(points)} wrong"
+
+
+@pytest.mark.parametrize("light", [sc.PointLight((400.0, 30.0, 20.0)), sc.DirectionalLight((-1.0, -0.07, -0.05))],
+                         ids=["point", "directional"])
+def test_no_leaks_through_the_edges_of_a_wall_far_from_the_receivers(device, rng, light):
+    """Rays from receivers near the frame's centre (the occluders' box centre: a speck balances the wall)
+    through shared edges and vertices of a wall 40 units away: the cone test's rounding grows with the
+    corners' distance from the centre (kernels/exact.cl wt_cone_record's sigma). Without its bound the
+    cone test leaks here (2 rays of 5,781 for the point light, 35 for the directional one)."""
+    wall = grid_plane(6, 1.0)
+    wall = sc.Mesh(wall.vertices[:, [1, 0, 2]] + [40.0, 0.0, 0.0], wall.faces)       # the plane x = 40
+    speck = sc.Mesh([[-40.0, 0.0, 0.0], [-40.0, 0.01, 0.0], [-40.0, 0.0, 0.01]], [[0, 1, 2]])
+    mesh = sc.Mesh.concatenate([wall, speck])
+    v, f = wall.vertices.astype(np.float32), wall.faces
+    edges = np.unique(np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1), axis=0)
+    lam = rng.random((len(edges), 60)).astype(np.float32)
+    targets = (v[edges[:, 0]][:, None] + lam[..., None] * (v[edges[:, 1]] - v[edges[:, 0]])[:, None]).reshape(-1, 3)
+    targets = np.concatenate([targets, v]).astype(np.float64)
+    targets = targets[np.abs(targets[:, 1:]).max(axis=1) < 0.999]        # shared edges only: not the rim
+    if isinstance(light, sc.PointLight):
+        towards = light.position - targets
+        towards /= np.linalg.norm(towards, axis=1, keepdims=True)
+    else:
+        towards = np.tile(-light.direction, (len(targets), 1))
+    points = targets - (40.0 / towards[:, 0])[:, None] * towards        # back to the plane x = 0
+    mask, _ = classify(mesh, light, points, eps=1e-6, device=device)
+    assert len(points) > 5000 and mask.all(), f"{int((~mask).sum())} leaks of {len(points)}"
+
 # Hard cases of DESIGN.md -----------------------------------------------------------------------------
 def grid_plane(n, size, y=0.0):
     xs = np.linspace(-size, size, n + 1)

@@ -23,10 +23,20 @@ receivers on the ground + 200 k on the model, random order, PoCL on 2 cores; ran
 - CSR lists (default) over linked lists: the linked build's single pass costs more than count + scan
   + fill (every entry takes a node from one global atomic counter: 36-65 ms against 15-25 ms) and its
   walk chases pointers (classify 1.4-1.5x slower).
-- Triangle records of 64 bytes (the 9 corner floats, then the unit normal and the light's side of the
-  plane): the kernel first skips a triangle whose plane the segment cannot reach (plane cull, exact:
-  it never removes a crossing), which rejects ~3/4 of the visited entries before the watertight test.
-  With coherent receivers it cut classify by ~25%; with random ones it pays for its larger records.
+- Triangle records of 128 bytes (the 9 corner floats, the unit normal and the light's side of the
+  plane; then the triangle's three edge planes through the light, or along a directional light's
+  travel, with their rounding bounds): the kernel first skips a triangle whose plane the segment
+  cannot reach (plane cull, exact: it never removes a crossing), which rejects ~3/4 of the visited
+  entries; then the edge planes settle the rest (a lane's line to the light certainly outside the
+  triangle's cone: miss; certainly inside with the plane certainly crossed: hit), and only lanes
+  within rounding of an edge, a vertex or the plane take the watertight test, which decides them as
+  before (ray_triangle.h wt_cone; the bound makes the cone never contradict a certain answer, so it
+  opens no leak). Against the watertight test for every lane past the cull (2026-12-07, bench/kernels_ab.py,
+  interleaved, medians (minima) of 9, classify ms, with / without normals): default 7.3 (7.2) -> 6.5
+  (6.1) / 19.6 (15.7) -> 16.8 (13.5), light_inside 18.1 (12.9) -> 11.7 (9.8) / 33.2 (28.4) -> 29.3
+  (19.9), bunny 21.7 (20.6) -> 21.4 (17.6) / 34.3 (25.8) -> 32.2 (23.8), ogre 21.5 (21.4) -> 18.4 (18.1)
+  / 32.9 (27.9) -> 25.0 (24.8), city_block 9.9 (9.6) -> 6.8 (6.6) / 27.0 (22.2) -> 13.2 (11.3), teapot
+  14.6 (13.5) -> 13.9 (10.4) / 18.2 (16.1) -> 18.1 (13.6); the same masks on all 12.
 - Lists are not sorted by distance: with the cull, lit receivers' walks are cheap, and shadowed ones
   stop at the first hit; a sort would cost a pass.
 - Receivers are binned by cell on the device, then walked ``BIN_LANES`` (8) at a time (``order="cells"``,
@@ -138,7 +148,7 @@ ORDERS = ("cells", "caller")
 BIN_LANES = 8             # receivers per packet in 'cells' order (kernels/vecmath.h LANES)
 FAR = 5                   # the code of a point beyond the near box (kernels/exact.cl)
 DOT5_FLOATS = 16          # kernels/ray_triangle.h
-WT_FLOATS = 16
+WT_FLOATS = 32
 SPLIT_PER_COARSE_CELL = 8.0   # coarse entries per coarse cell above which large triangles are split
 SPLIT_ROUNDS = 4              # rounds of two bisections at most: a piece keeps at least 1/256 of its triangle
 
