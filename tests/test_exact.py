@@ -260,7 +260,6 @@ def test_no_leaks_on_exact_ties(device):
                 assert mask.all(), f"{test}: {int((~mask).sum())} leaks of {len(points)}"
 
 
-
 @pytest.mark.parametrize("light", [sc.PointLight((0.3, 10.0, 0.2)), sc.DirectionalLight((0.1, -1.0, 0.05))],
                          ids=["point", "directional"])
 def test_a_hit_just_within_eps_does_not_count_where_the_plane_test_is_unsure(device, rng, light):
@@ -271,11 +270,8 @@ def test_a_hit_just_within_eps_does_not_count_where_the_plane_test_is_unsure(dev
     eps = 1e-3
     plane = grid_plane(2, 4.0)
     on_plane = np.column_stack([rng.uniform(-3, 3, 4000), np.zeros(4000), rng.uniform(-3, 3, 4000)])
-    if isinstance(light, sc.PointLight):
-        towards = light.position - on_plane
-        towards /= np.linalg.norm(towards, axis=1, keepdims=True)
-    else:
-        towards = np.tile(-light.direction, (len(on_plane), 1))
+    towards = light.direction_to_light(on_plane)
+    towards /= np.linalg.norm(towards, axis=1, keepdims=True)
     beyond = rng.random(len(on_plane)) < 0.5
     reach = eps * np.where(beyond, 1 + 1e-3, 1 - 1e-3)          # from the start to the plane, along the ray
     points = on_plane - reach[:, None] * towards
@@ -302,14 +298,12 @@ def test_no_leaks_through_the_edges_of_a_wall_far_from_the_receivers(device, rng
     targets = (v[edges[:, 0]][:, None] + lam[..., None] * (v[edges[:, 1]] - v[edges[:, 0]])[:, None]).reshape(-1, 3)
     targets = np.concatenate([targets, v]).astype(np.float64)
     targets = targets[np.abs(targets[:, 1:]).max(axis=1) < 0.999]        # shared edges only: not the rim
-    if isinstance(light, sc.PointLight):
-        towards = light.position - targets
-        towards /= np.linalg.norm(towards, axis=1, keepdims=True)
-    else:
-        towards = np.tile(-light.direction, (len(targets), 1))
+    towards = light.direction_to_light(targets)
+    towards /= np.linalg.norm(towards, axis=1, keepdims=True)
     points = targets - (40.0 / towards[:, 0])[:, None] * towards        # back to the plane x = 0
     mask, _ = classify(mesh, light, points, eps=1e-6, device=device)
     assert len(points) > 5000 and mask.all(), f"{int((~mask).sum())} leaks of {len(points)}"
+
 
 # Hard cases of DESIGN.md -----------------------------------------------------------------------------
 def grid_plane(n, size, y=0.0):
