@@ -216,8 +216,9 @@ def caps_error() -> str:
 
 METHOD_ROWS = [  # method, paper, status (static prose), and the function giving its two figure cells
     ("`exact`", "Lai & Cheng 2007 §4.2 on the original triangles: light-space lists built on the device with atomics "
-     "(an irregular Z-buffer) + the watertight ray/triangle test of Woop et al. 2013 (`test=\"dot5\"`: the paper's "
-     "5-dot-product test)", "done", exact_cells),
+     "(an irregular Z-buffer), receivers binned by cell and tested 8 at a time; per triangle a plane test, then the "
+     "edge planes through the light with rounding bounds, and the watertight test of Woop et al. 2013 for the lanes "
+     "those cannot settle (`test=\"dot5\"`: the paper's 5-dot-product test)", "done", exact_cells),
     ("`shadow_map`", "Williams 1978: light-view depth and triangle ids from the raster kernel; bias \"plane\" "
      "(default, no normals needed: the texel's triangle plane at the receiver's ray and exact tests of the 3 x 3 "
      "texels' triangles, after Dou et al. 2014's adaptive depth bias), constant / slope / normal-offset bias, "
