@@ -213,8 +213,9 @@ INLINE lint wt_hit(const WtRay *r, float v0x, float v0y, float v0z, float v1x, f
  * point light or n.(-direction) for a directional light, and its rounding bound eL (2), the relative
  * bound rel of the plane test (1: 1e-6 plus how far the computed normal may lean, large for slivers),
  * 1 float of padding. The second line, for the cone test: the three edge planes m0, m1, m2 (9), through
- * the light (point) or along its direction (directional), each oriented so that the triangle lies on
- * its positive side; the rounding scale tau and offset sigma of their values (2); the planes' offsets
+ * the light (point) or along its direction (directional), each oriented so that a line to the light
+ * through the triangle is on its positive side (wt_cone); the rounding scale tau and offset sigma of
+ * their values (2); the planes' offsets
  * w0, w1, w2 (3: m_k . v_k for a directional light, 0 for a point light); 2 floats of padding. */
 #define WT_FLOATS 32
 #define NORMAL_ULPS 8.0f   /* the cross product's rounding, in FLT_EPSILON, that the cull allows for */
@@ -243,11 +244,11 @@ INLINE lint wt_plane(__global const float *t, lfloat sx, lfloat sy, lfloat sz, l
 
 /* Cone test: the lanes whose line to the light certainly misses the triangle (outside one of its edge
  * planes by more than the rounding bound), and in *inside those whose line certainly passes through it
- * (inside all three). The planes contain the light (point light: x = d = light - s, the values
- * m_k . d up to sign) or its direction (directional: x = s, the values m_k . s - w_k); x_norm = |x|_1.
- * With the plane test's crossing, inside is a hit, and outside is a miss: what the watertight test
- * would say, decided without it, except near an edge or a vertex (within the bound), where neither is
- * certain and the watertight test decides (wt_record's bound; the lanes on a shared edge go to it). */
+ * (inside all three). The planes contain the light (point light: x = d = light - s, the values m_k . d)
+ * or its direction (directional: x = s, the values m_k . s - w_k); x_norm = |x|_1. With the plane
+ * test's crossing, inside is a hit, and outside is a miss: what the watertight test would say, decided
+ * without it, except near an edge or a vertex (within the bound: exact.cl wt_cone_record), where
+ * neither is certain and the watertight test decides (a lane on a shared edge goes to it). */
 INLINE lint wt_cone(__global const float *t, lfloat x, lfloat y, lfloat z, lfloat x_norm, lint *inside)
 {
     const lfloat bound = t[25] * x_norm + t[26];
