@@ -23,7 +23,7 @@ import numpy as np
 from .checks import positive_int
 from .device import get_device
 from .lights import DirectionalLight, PointLight, check_light
-from .methods import as_mesh, method_class, resolve_eps, with_receiver_count
+from .methods import as_mesh, method_class, resolve_eps, with_light_count, with_receiver_count
 from .points import Points, check_points
 from .shadows import Shadows
 
@@ -141,7 +141,8 @@ class LightJob:
             cls(get_device(device), **params)
         else:
             cls.check_parameter_names(params)
-        self.scene_or_mesh, self.method, self.device, self.params = scene_or_mesh, cls.name, device, params
+        self.scene_or_mesh, self.method, self.device = scene_or_mesh, cls.name, device
+        self.params = with_light_count(cls.name, params, len(self.lights))
         resolve_eps(cls, eps, mesh.bounds)                     # a bad eps raises here; None stays None, so
         self.eps = eps                                         # that a method refusing an eps gets none
         self.batch = positive_int("batch", batch)

@@ -141,10 +141,12 @@ from .lights import PointLight
 from .lists import check_filled
 from .methods import Method, check_prepare
 from .points import MovedPoints, check_points
+from .solids import solids
 
 TESTS = ("watertight", "dot5")
 LISTS = ("csr", "linked")
 ORDERS = ("cells", "caller")
+CULL_FROM_LIGHTS = 64     # many-lights calls cull from this many lights (the certificate pays: docs/exact-speed.md)
 BIN_LANES = 8             # receivers per packet in 'cells' order (kernels/vecmath.h LANES)
 FAR = 5                   # the code of a point beyond the near box (kernels/exact.cl)
 DOT5_FLOATS = 16          # kernels/ray_triangle.h
@@ -209,6 +211,7 @@ class ExactMethod(Method):
     # or, behind a single view, in brute_cell. Spares Shadows' host pass over the receivers when the light
     # is among them (1.2 M receivers: ~4 ms of a one-shot call on light_inside).
     answers_at_the_light = True
+    cull_from_lights = CULL_FROM_LIGHTS
     parameters = {
         "resolution": (None, "cells on the longer side of each light view; None picks the grid from the "
                              "triangle count and expected_receivers"),
@@ -231,6 +234,11 @@ class ExactMethod(Method):
                          "by pieces small enough for the fine grid; the walk still tests the whole triangle. "
                          "Pays only when one prepared structure answers very many queries (its build costs "
                          "~50 ms more to save 2-5 % of a query on light_inside: see the module docstring)"),
+        "cull": (False, "list only the faces of certified solids that every blocked segment crosses (shadowcl."
+                        "solids: the faces turned towards a light outside a closed, embedded solid), about half of "
+                        "them; the same answers. The certificate is made once per mesh, in NumPy (0.02-1.1 s on the "
+                        "bench scenes), so it pays over many lights: shadow_counts and shadow_matrix turn it on "
+                        "from CULL_FROM_LIGHTS lights unless told"),
     }
 
     def __init__(self, device, **params):
@@ -244,6 +252,7 @@ class ExactMethod(Method):
         self.chunk = positive_int("chunk", p["chunk"], maximum=1 << 29)
         self.order = choice("order", p["order"], ORDERS)
         self.split = flag("split", p["split"])
+        self.cull = flag("cull", p["cull"])
         self._builder = lightspace.ListBuilder(device, corners=3)
         # float64 points go to the device as they are when it has doubles (cheaper than converting here)
         self._fp64 = "cl_khr_fp64" in device.cl_device.extensions
@@ -279,7 +288,7 @@ class ExactMethod(Method):
         origin = 0.5 * (mesh.bounds[0] + mesh.bounds[1])
         scale = bounds_diagonal(union)
         vertices = (mesh.vertices.astype(np.float64) - origin).astype(np.float32)
-        ntris = len(mesh.faces)
+        faces, ntris = self._faces_to_list(mesh, light)      # the views see every face, the lists ntris
         views = lightspace.fit_views(light, box, origin, scale)
         # One program for every kernel of this method (its options are known once the views' kind is)
         options = views.options + (
@@ -295,16 +304,18 @@ class ExactMethod(Method):
         else:
             light_vec = np.asarray(light.direction, dtype=np.float32)
         # (F, 3, 3) float32 triangles gathered on the device, and in the same launch the test's records
-        tris_dev = dev.empty(36 * ntris, "triangles")
+        tris_dev = dev.empty(36 * len(faces), "triangles")
         floats, kind = (DOT5_FLOATS, "dot5") if self.test == "dot5" else (WT_FLOATS, "watertight")
-        records = dev.empty(4 * floats * ntris, f"{kind} triangle records")
+        records = dev.empty(4 * floats * len(faces), f"{kind} triangle records")
         dev.kernel("exact.cl", "triangle_records", options)(
-            dev.queue, (ntris,), None, dev.to_device(vertices), dev.to_device(mesh.faces), np.int32(ntris),
+            dev.queue, (len(faces),), None, dev.to_device(vertices), dev.to_device(faces), np.int32(len(faces)),
             *(np.float32(c) for c in light_vec), tris_dev, records)
         t1 = time.perf_counter()
         # Views and grid
-        views = lightspace.fit_to_footprint(dev, views, tris_dev, ntris)
-        cells = lightspace.pick_cell_count(ntris, self.expected_receivers)
+        # Views and grid fitted to every face: receivers lie on the culled ones too (measured on light_inside
+        # without normals, fitted to the listed faces only: 49 -> 59 ms a light, some views 4 x 4 cells)
+        views = lightspace.fit_to_footprint(dev, views, tris_dev, len(faces))
+        cells = lightspace.pick_cell_count(len(faces), self.expected_receivers)
         grid = lightspace.make_grid(views, cells=cells, resolution=self.resolution)
         t2 = time.perf_counter()
         lists = self._builder.build(grid, tris_dev, ntris, self.lists_kind, self.initial_capacity,
@@ -312,7 +323,7 @@ class ExactMethod(Method):
         split = dict(split_triangles=0, split_pieces=0, split_rounds=0)
         if self.split and self.lists_kind == "csr" and \
                 lists.coarse_entries > SPLIT_PER_COARSE_CELL * (grid.cells - grid.fine_cells):
-            lists, split = self._split_lists(grid, lists, vertices, mesh.faces)
+            lists, split = self._split_lists(grid, lists, vertices, faces[:ntris])
         dev.queue.finish()
         t3 = time.perf_counter()
 
@@ -326,11 +337,23 @@ class ExactMethod(Method):
         device_bytes = sum(b.size for b in (tris_dev, records, *lists.buffers(), lists.fine_masks, lists.params)
                            if b is not None)
         self.stats.update(
-            triangles=ntris, lists=self.lists_kind, test=self.test, device_bytes=int(device_bytes), **split,
+            triangles=len(mesh.faces), listed_triangles=ntris, lists=self.lists_kind, test=self.test,
+            device_bytes=int(device_bytes), **split,
             # entries per fine cell; linked lists do not know their coarse share, so it is counted in there
             mean_list=(lists.entries - max(lists.coarse_entries, 0)) / grid.fine_cells,
             upload_s=t1 - t0, views_s=t2 - t1, lists_s=t3 - t2, prepare_s=t3 - t0,
         )
+
+    def _faces_to_list(self, mesh: Mesh, light) -> tuple[np.ndarray, int]:
+        """``mesh.faces`` reordered so that those to list for ``light`` come first, and how many they are:
+        every face, or with ``cull``, those the light needs of the certified solids
+        (:meth:`shadowcl.solids.Solids.faces_for`) and every other face."""
+        listed = solids(mesh).faces_for(light) if self.cull else None
+        if listed is None:
+            return mesh.faces, len(mesh.faces)
+        culled = np.ones(len(mesh.faces), dtype=bool)
+        culled[listed] = False
+        return mesh.faces[np.concatenate([listed, np.flatnonzero(culled)])], len(listed)
 
     def resolved_params(self) -> dict:
         """The parameters, with the grid resolution picked (cells on the longer side of the largest view)."""

@@ -116,13 +116,13 @@ def check_clearance(mesh: Mesh, light, clearance: float, method: str) -> None:
     tri = mesh.triangles.astype(np.float64)
     x = light.position
     near = np.all((tri.min(axis=1) <= x + reach) & (tri.max(axis=1) >= x - reach), axis=1)
-    if np.any(near) and _triangle_distance(tri[near], x).min() < reach:
+    if np.any(near) and triangle_distances(tri[near], x).min() < reach:
         raise ValueError(f"light: the point light at {x.tolist()} lies within {clearance:.0e} of the scene's size "
                          f"({reach:.3g}) of an occluding triangle, too close for the {method} method to answer; "
                          f"move it off the surface or use method='exact' or 'shadow_map'")
 
 
-def _triangle_distance(tri: np.ndarray, x: np.ndarray) -> np.ndarray:
+def triangle_distances(tri: np.ndarray, x: np.ndarray) -> np.ndarray:
     """(T,) distances from point ``x`` to triangles ``tri`` (T, 3, 3): the plane's where ``x`` projects
     inside the triangle, else the nearest edge's."""
     a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]

@@ -191,6 +191,16 @@ def with_receiver_count(name: str, params: dict, count: int) -> dict:
     return params
 
 
+def with_light_count(name: str, params: dict, count: int) -> dict:
+    """``params`` plus ``cull=True`` when method ``name`` can cull the faces a light does not need (the
+    exact method: :mod:`shadowcl.solids`), a many-lights call has at least its ``CULL_FROM_LIGHTS``
+    lights and the caller did not say: the certificate, made once, then costs less than the lights save."""
+    cls = method_class(name)
+    if "cull" in cls.parameters and "cull" not in params and count >= cls.cull_from_lights:
+        return {**params, "cull": True}
+    return params
+
+
 def with_receivers(name: str, params: dict, receivers) -> dict:
     """``params`` plus ``receivers=`` when method ``name`` calibrates on the caller's receivers ("auto") and
     the caller did not say: the one-shot calls and the renderer know them before they prepare."""

@@ -1,0 +1,326 @@
+"""Which closed components of a mesh are solids (embedded surfaces), and the faces a light needs of them.
+
+Why: call a face "towards" a light when the light is on its front (the side its winding's normal
+points to), else "away". A segment from a start s to the light crosses a closed, consistently wound
+surface C ``#towards - #away = w_C(s) - w_C(light)`` times, signed, where ``w_C`` is C's winding
+number. When C is embedded (no two of its triangles meet except along their shared edges and
+corners), ``w_C`` is 0 outside and one ``sigma`` inside: +1 wound outwards, -1 inwards. Then the sign
+of the difference is known, so one kind of face meets every segment that meets C at all, and the
+exact method may list only that kind (:meth:`Solids.faces_for`): about half the faces, and the lists
+and the walks shrink with them.
+
+Which kind: the faces towards the light when ``sigma > 0`` and the light is outside C, or ``sigma < 0``
+and it is inside; else those away. (Wound outwards, light outside: ``#towards - #away = w_C(s) >= 0``,
+so a segment that meets C meets a face towards the light.) A self-intersecting or partly inside-out
+closed mesh has regions of the other sign, where a segment may meet only the other kind (tests/
+test_solids.py's finger: thousands of receivers wrong): such a component keeps all its faces. The
+certificate, computed once per mesh (:func:`solids`) and reused by every light:
+
+- **closed and consistently wound**: :attr:`shadowcl.topology.EdgeAdjacency.closed_faces`;
+- **embedded**: no two triangles of the component intersect except as neighbours must (along their
+  shared edge, at their shared corner). Candidate pairs are those whose boxes share a cell of a grid
+  per component; each pair is proved apart, in float64, with margins far above its rounding: by a
+  separating axis (the 17 of two triangles, coplanar ones included) when they share no corner, by the
+  far corner's side of the plane when they share an edge, by a plane through the shared corner when
+  they share one. A pair that cannot be proved apart (touching, or too close to call) leaves its
+  component uncertified: the answer stays exact, only slower;
+- **the sign**: the component's signed volume, which must be clearly non-zero;
+- **the light's side** (per light): outside the component's box, or its winding number (solid angles,
+  :func:`shadowcl.topology.solid_angles`; 0 or ``sigma`` off an embedded surface). A point light within
+  ``LIGHT_CLEARANCE`` of the component's size from its triangles lists all its faces: on the surface
+  the winding number is fractional (1/8 at a box's corner), and very near it the float64 sum of solid
+  angles may round to the wrong side.
+
+A face within rounding of the light's plane (a directional light along it, a point light in it) is
+listed either way. Faces of open components, and of components not certified, are always listed.
+"""
+
+from __future__ import annotations
+
+import weakref
+from dataclasses import dataclass
+
+import numpy as np
+
+from .frame import triangle_distances
+from .geometry import Mesh
+from .lights import PointLight
+from .topology import edge_adjacency, solid_angles
+
+REL = 1e-9                  # margins, relative to the sizes involved: float64 rounding is ~1e-16 of them
+MAX_CELLS_PER_FACE = 16     # grid cells per face on average before a component's cells are made larger
+MAX_PAIRS_PER_FACE = 256    # candidate pairs per face beyond which no component is certified (the test's cost)
+LIGHT_CLEARANCE = 1e-6     # a point light nearer a solid than this share of its box diagonal lists all its faces
+
+_CACHE: "weakref.WeakKeyDictionary[Mesh, Solids]" = weakref.WeakKeyDictionary()
+
+
+@dataclass(frozen=True, eq=False)
+class Solids:
+    """A mesh's certified solids: ``sigma`` (F,) int8, +1 or -1 for a face of a component certified
+    embedded and wound outwards or inwards, 0 for every other face; ``label`` (F,) each face's
+    component; ``normals`` (F, 3) float64 (not unit) and ``offsets`` (F,) the faces' planes
+    (``normals . x = offsets``), ``scales`` (F,) the product of two edge lengths (a bound on the normal's
+    length and the size of its rounding); ``low`` / ``high`` (C, 3) the components' boxes."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    sigma: np.ndarray
+    label: np.ndarray
+    normals: np.ndarray
+    offsets: np.ndarray
+    scales: np.ndarray
+    low: np.ndarray
+    high: np.ndarray
+
+    @property
+    def certified_faces(self) -> int:
+        return int(np.count_nonzero(self.sigma))
+
+    def faces_for(self, light) -> np.ndarray | None:
+        """Ids of the faces ``light`` needs listed (ascending), or None when that is every face."""
+        if not self.certified_faces:
+            return None
+        sigma = self.sigma.astype(np.int64)
+        if isinstance(light, PointLight):
+            position = np.asarray(light.position, dtype=np.float64)
+            side = self.normals @ position - self.offsets
+            reach = np.abs(position).max() + np.abs(self.vertices[self.faces[:, 0]]).max(axis=1)
+            inside, unsure = self._light_sides(position)
+            sigma = np.where(unsure[self.label], 0, np.where(inside[self.label], -sigma, sigma))
+        else:
+            side = self.normals @ -np.asarray(light.direction, dtype=np.float64)
+            reach = 1.0
+        keep = (sigma == 0) | (sigma * side >= -REL * self.scales * reach)
+        return None if keep.all() else np.flatnonzero(keep)
+
+    def _light_sides(self, position: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(C,) bool twice: the light inside each certified component, and too near its surface to
+        rely on that (within LIGHT_CLEARANCE of its size, where the winding number's float64 sum may
+        round to the wrong integer, or on it, where it is fractional)."""
+        ncomp = len(self.low)
+        inside, unsure = np.zeros(ncomp, dtype=bool), np.zeros(ncomp, dtype=bool)
+        size = np.linalg.norm(self.high - self.low, axis=1)
+        pad = LIGHT_CLEARANCE * size[:, None]
+        near = np.all((self.low - pad <= position) & (position <= self.high + pad), axis=1)
+        certified = np.zeros(ncomp, dtype=bool)
+        certified[self.label[self.sigma != 0]] = True
+        for comp in np.flatnonzero(near & certified):
+            tri = self.vertices[self.faces[self.label == comp]]
+            if triangle_distances(tri, position).min() <= LIGHT_CLEARANCE * size[comp]:
+                unsure[comp] = True
+                continue
+            winding = solid_angles(tri, position).sum() / (4 * np.pi)
+            inside[comp] = abs(winding) > 0.5
+        return inside, unsure
+
+
+def solids(mesh: Mesh) -> Solids:
+    """The :class:`Solids` of ``mesh``, certified once per mesh (a :class:`Mesh` is immutable)."""
+    cached = _CACHE.get(mesh)
+    if cached is None:
+        cached = _certify(mesh)
+        _CACHE[mesh] = cached
+    return cached
+
+
+def _certify(mesh: Mesh) -> Solids:
+    adjacency = edge_adjacency(mesh)
+    vertices = mesh.vertices.astype(np.float64)
+    faces = mesh.faces.astype(np.int64)
+    label = np.asarray(adjacency.components, dtype=np.int64)
+    ncomp = int(label.max()) + 1
+    tris = vertices[faces]                                                  # (F, 3, 3)
+    normals = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    offsets = np.einsum("ij,ij->i", normals, tris[:, 0])
+    scales = np.linalg.norm(tris[:, 1] - tris[:, 0], axis=1) * np.linalg.norm(tris[:, 2] - tris[:, 0], axis=1)
+    low = np.full((ncomp, 3), np.inf)
+    high = np.full((ncomp, 3), -np.inf)
+    np.minimum.at(low, label, tris.min(axis=1))
+    np.maximum.at(high, label, tris.max(axis=1))
+
+    good = np.zeros(ncomp, dtype=bool)
+    good[label[adjacency.closed_faces]] = True
+    good[label[adjacency.collapsed_faces]] = False
+    sigma_of = _volume_signs(tris, label, ncomp, low, high)
+    good &= sigma_of != 0
+    if good.any():
+        candidates = np.flatnonzero(good[label])
+        bad = _components_not_embedded(tris, faces, label, candidates, low, high)
+        good[bad] = False
+    sigma = np.where(good[label], sigma_of[label], 0).astype(np.int8)
+    return Solids(vertices, faces, sigma, label, normals, offsets, scales, low, high)
+
+
+def _volume_signs(tris, label, ncomp, low, high) -> np.ndarray:
+    """(C,) int: the sign of each component's signed volume, 0 where it is too small to be sure of."""
+    centre = 0.5 * (low + high)[label]                                      # fewer cancellations
+    a, b, c = (tris[:, i] - centre for i in range(3))
+    volume = np.bincount(label, weights=np.einsum("ij,ij->i", a, np.cross(b, c)), minlength=ncomp) / 6
+    size = np.linalg.norm(high - low, axis=1)
+    return np.where(np.abs(volume) > 1e-6 * size ** 3, np.sign(volume), 0).astype(np.int64)
+
+
+def _components_not_embedded(tris, faces, label, ids, low, high) -> np.ndarray:
+    """Labels of the components among faces ``ids`` with a pair of triangles not proved apart."""
+    pairs = _candidate_pairs(tris[ids], label[ids], low, high)
+    if pairs is None:
+        return np.unique(label[ids])
+    a, b = ids[pairs[:, 0]], ids[pairs[:, 1]]
+    apart = _apart(tris[a], tris[b], faces[a], faces[b])
+    return np.unique(label[a[~apart]])
+
+
+def _candidate_pairs(tris, label, low, high) -> np.ndarray | None:
+    """(P, 2) index pairs (i < j) of triangles of one component whose boxes share a cell of that
+    component's grid: every pair that may intersect, and others. None if they are too many."""
+    lo, hi = tris.min(axis=1), tris.max(axis=1)
+    pad = REL * np.abs(high - low).max(axis=1)[label][:, None] + REL * np.abs(lo)
+    lo, hi = lo - pad, hi + pad
+    extent = (hi - lo).max(axis=1)
+    ncomp = len(low)
+    order = np.lexsort((extent, label))                      # by component, then face size
+    starts = np.searchsorted(label[order], np.arange(ncomp))
+    ends = np.searchsorted(label[order], np.arange(ncomp), side="right")
+    middle = order[np.clip((starts + ends - 1) // 2, 0, len(order) - 1)]
+    cell = np.where(ends > starts, 2 * extent[middle], 0.0)   # twice a component's median face size
+    cell = np.maximum(cell, REL * np.abs(high - low).max(axis=1) + np.finfo(float).tiny)
+    for _ in range(64):                                      # doubled while its faces cover too many cells
+        first = np.floor((lo - low[label]) / cell[label][:, None]).astype(np.int64)
+        last = np.floor((hi - low[label]) / cell[label][:, None]).astype(np.int64)
+        span = last - first + 1
+        count = span.prod(axis=1)
+        per_comp = np.bincount(label, weights=count, minlength=ncomp)
+        faces_per_comp = np.bincount(label, minlength=ncomp)
+        crowded = per_comp > MAX_CELLS_PER_FACE * np.maximum(faces_per_comp, 1)
+        if not crowded.any():
+            break
+        cell[crowded] *= 2
+    else:
+        return None
+    shift = first.min(axis=0)                               # padded boxes may start a cell below 0
+    first, last = first - shift, last - shift
+    dims = last.max(axis=0) + 1
+    if float(np.prod(dims.astype(np.float64))) * ncomp >= 2.0 ** 62:
+        return None
+    face = np.repeat(np.arange(len(tris)), count)
+    k = np.arange(len(face)) - np.repeat(np.cumsum(count) - count, count)
+    sx, sy = span[face, 0], span[face, 1]
+    ix = first[face, 0] + k % sx
+    iy = first[face, 1] + (k // sx) % sy
+    iz = first[face, 2] + k // (sx * sy)
+    key = ((label[face] * dims[0] + ix) * dims[1] + iy) * dims[2] + iz
+    order = np.argsort(key, kind="stable")
+    key, face = key[order], face[order]
+    start = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
+    size = np.diff(np.r_[start, len(key)])
+    group_start = np.repeat(start, size)
+    rank = np.arange(len(key)) - group_start
+    later = np.repeat(size, size) - 1 - rank                 # entries after this one in its cell
+    total = int(later.sum())
+    if total > MAX_PAIRS_PER_FACE * len(tris):
+        return None
+    first_of = np.repeat(np.arange(len(key)), later)
+    step = np.arange(total) - np.repeat(np.cumsum(later) - later, later) + 1
+    i, j = face[first_of], face[first_of + step]
+    i, j = np.minimum(i, j), np.maximum(i, j)
+    keys = np.sort(i * len(tris) + j)
+    keys = keys[np.r_[True, keys[1:] != keys[:-1]]] if len(keys) else keys
+    i, j = keys // len(tris), keys % len(tris)
+    overlap = np.all((lo[i] <= hi[j]) & (lo[j] <= hi[i]), axis=1)
+    return np.stack([i[overlap], j[overlap]], axis=1)
+
+
+def _apart(ta, tb, fa, fb) -> np.ndarray:
+    """(P,) bool: triangles ``ta``, ``tb`` ((P, 3, 3) float64, corner ids ``fa``, ``fb``) proved to meet
+    at most as mesh neighbours do: nowhere, along their shared edge, or at their shared corner."""
+    same = fa[:, :, None] == fb[:, None, :]                       # (P, 3, 3): corner i of a is corner j of b
+    shared = same.sum(axis=(1, 2))
+    apart = np.zeros(len(ta), dtype=bool)
+    for n, test in ((0, _separated), (1, _apart_at_corner), (2, _apart_at_edge)):
+        rows = np.flatnonzero(shared == n)
+        if len(rows):
+            apart[rows] = test(ta[rows], tb[rows], same[rows])
+    return apart
+
+
+def _separated(ta, tb, _same) -> np.ndarray:
+    """Disjoint by a separating axis: the two normals, the nine edge-edge cross products and, for
+    coplanar pairs, the six in-plane edge normals (complete for two triangles). Each axis is tried on
+    the pairs no earlier one separated."""
+    origin = ta[:, :1]
+    ta, tb = ta - origin, tb - origin
+    ea, eb = np.roll(ta, -1, axis=1) - ta, np.roll(tb, -1, axis=1) - tb
+    na, nb = np.cross(ea[:, 0], ea[:, 1]), np.cross(eb[:, 0], eb[:, 1])
+    axes = [(lambda r: na[r], 2), (lambda r: nb[r], 2)]        # (axis of the rows r, its degree in lengths)
+    axes += [(lambda r, i=i, j=j: np.cross(ea[r, i], eb[r, j]), 2) for i in range(3) for j in range(3)]
+    axes += [(lambda r, i=i: np.cross(na[r], ea[r, i]), 3) for i in range(3)]
+    axes += [(lambda r, i=i: np.cross(nb[r], eb[r, i]), 3) for i in range(3)]
+    size = np.abs(np.concatenate([ta, tb], axis=1)).max(axis=(1, 2))
+    apart = np.zeros(len(ta), dtype=bool)
+    rows = np.arange(len(ta))
+    for axis_of, degree in axes:
+        axis = axis_of(rows)
+        pa, pb = np.einsum("pkj,pj->pk", ta[rows], axis), np.einsum("pkj,pj->pk", tb[rows], axis)
+        gap = REL * size[rows] ** (degree + 1)
+        done = (pa.max(axis=1) < pb.min(axis=1) - gap) | (pb.max(axis=1) < pa.min(axis=1) - gap)
+        apart[rows[done]] = True
+        rows = rows[~done]
+        if not len(rows):
+            break
+    return apart
+
+
+def _apart_at_edge(ta, tb, same) -> np.ndarray:
+    """Neighbours across an edge meet only along it: b's far corner off a's plane, or in it but on the
+    other side of the edge."""
+    rows = np.arange(len(ta))
+    ia = np.argmin(same.any(axis=2), axis=1)                  # a's corner off the edge
+    ib = np.argmin(same.any(axis=1), axis=1)
+    ja = (ia + 1) % 3
+    p, q, c, d = ta[rows, ja], ta[rows, (ia + 2) % 3], ta[rows, ia], tb[rows, ib]
+    edge = q - p
+    na = np.cross(edge, c - p)
+    size = np.abs(np.stack([p, q, c, d], axis=1) - p[:, None]).max(axis=(1, 2))
+    off_plane = np.abs(np.einsum("ij,ij->i", na, d - p)) > REL * size ** 3
+    across = np.einsum("ij,ij->i", na, np.cross(edge, d - p)) < -REL * size ** 4
+    return off_plane | across
+
+
+def _apart_at_corner(ta, tb, same) -> np.ndarray:
+    """Triangles sharing one corner v meet only there when a plane through v has one strictly on each
+    side, each touching it at most along the rays the plane is built from."""
+    rows = np.arange(len(ta))
+    ia = np.argmax(same.any(axis=2), axis=1)
+    ib = np.argmax(same.any(axis=1), axis=1)
+    v = ta[rows, ia]
+    a1, a2 = ta[rows, (ia + 1) % 3] - v, ta[rows, (ia + 2) % 3] - v
+    b1, b2 = tb[rows, (ib + 1) % 3] - v, tb[rows, (ib + 2) % 3] - v
+    size = np.abs(np.stack([a1, a2, b1, b2], axis=1)).max(axis=(1, 2))
+
+    def sides(r, m, degree, free_a, free_b):
+        """For rows r: m's plane through v touches a along its rays not in free_a, b along those not in
+        free_b; the free corners strictly on opposite sides, either way round."""
+        gap = REL * size[r] ** (degree + 1)
+        dot_a = [np.einsum("ij,ij->i", m, x[r]) for x in free_a]
+        dot_b = [np.einsum("ij,ij->i", m, x[r]) for x in free_b]
+        return np.any([np.all([s * d > gap for d in dot_a] + [-s * d > gap for d in dot_b], axis=0)
+                       for s in (1.0, -1.0)], axis=0)
+
+    na, nb = np.cross(a1, a2), np.cross(b1, b2)
+    tries = [(lambda r: na[r], 2, [], [b1, b2]), (lambda r: nb[r], 2, [a1, a2], [])]
+    for x, x_free in ((a1, a2), (a2, a1)):
+        tries.append((lambda r, x=x: np.cross(na[r], x[r]), 3, [x_free], [b1, b2]))
+        for y, y_free in ((b1, b2), (b2, b1)):
+            tries.append((lambda r, x=x, y=y: np.cross(x[r], y[r]), 2, [x_free], [y_free]))
+    for y, y_free in ((b1, b2), (b2, b1)):
+        tries.append((lambda r, y=y: np.cross(nb[r], y[r]), 3, [a1, a2], [y_free]))
+    apart = np.zeros(len(v), dtype=bool)
+    rows = np.arange(len(v))
+    for plane_of, degree, free_a, free_b in tries:              # each on the pairs not yet proved apart
+        done = sides(rows, plane_of(rows), degree, free_a, free_b)
+        apart[rows[done]] = True
+        rows = rows[~done]
+        if not len(rows):
+            break
+    return apart
