@@ -52,7 +52,9 @@ from .topology import edge_adjacency, solid_angles
 
 REL = 1e-9                  # margins, relative to the sizes involved: float64 rounding is ~1e-16 of them
 MAX_CELLS_PER_FACE = 16     # grid cells per face on average before a component's cells are made larger
-MAX_PAIRS_PER_FACE = 256    # candidate pairs per face beyond which no component is certified (the test's cost)
+MAX_PAIRS_PER_FACE = 256    # candidate pairs (before repeats go) per face beyond which no component is certified;
+MAX_PAIRS = 1 << 24         # and in all (~40 bytes each): the bench scenes need 24-64 per face, 0.5-3 M in all
+PAIRS_PER_PASS = 1 << 18    # pairs proved apart at a time
 LIGHT_CLEARANCE = 1e-6     # a point light nearer a solid than this share of its box diagonal lists all its faces
 MIN_CULLED = 0.1           # culls leaving out fewer faces than this share list them all (reasoned: see faces_for)
 
@@ -183,9 +185,11 @@ def _components_not_embedded(tris, faces, label, ids, low, high) -> np.ndarray:
     pairs = _candidate_pairs(tris[ids], label[ids], low, high)
     if pairs is None:
         return np.unique(label[ids])
-    a, b = ids[pairs[:, 0]], ids[pairs[:, 1]]
-    apart = _apart(tris[a], tris[b], faces[a], faces[b])
-    return np.unique(label[a[~apart]])
+    bad = []
+    for lo in range(0, len(pairs), PAIRS_PER_PASS):           # bounded memory: ~1 KB of temporaries a pair
+        a, b = ids[pairs[lo:lo + PAIRS_PER_PASS, 0]], ids[pairs[lo:lo + PAIRS_PER_PASS, 1]]
+        bad.append(label[a[~_apart(tris[a], tris[b], faces[a], faces[b])]])
+    return np.unique(np.concatenate(bad)) if bad else np.zeros(0, dtype=np.int64)
 
 
 def _candidate_pairs(tris, label, low, high) -> np.ndarray | None:
@@ -200,7 +204,7 @@ def _candidate_pairs(tris, label, low, high) -> np.ndarray | None:
     starts = np.searchsorted(label[order], np.arange(ncomp))
     ends = np.searchsorted(label[order], np.arange(ncomp), side="right")
     middle = order[np.clip((starts + ends - 1) // 2, 0, len(order) - 1)]
-    cell = np.where(ends > starts, 2 * extent[middle], 0.0)   # twice a component's median face size
+    cell = np.where(ends > starts, extent[middle], 0.0)         # a component's median face size
     cell = np.maximum(cell, REL * np.abs(high - low).max(axis=1) + np.finfo(float).tiny)
     for _ in range(64):                                      # doubled while its faces cover too many cells
         first = np.floor((lo - low[label]) / cell[label][:, None]).astype(np.int64)
@@ -235,7 +239,7 @@ def _candidate_pairs(tris, label, low, high) -> np.ndarray | None:
     rank = np.arange(len(key)) - group_start
     later = np.repeat(size, size) - 1 - rank                 # entries after this one in its cell
     total = int(later.sum())
-    if total > MAX_PAIRS_PER_FACE * len(tris):
+    if total > min(MAX_PAIRS_PER_FACE * len(tris), MAX_PAIRS):
         return None
     first_of = np.repeat(np.arange(len(key)), later)
     step = np.arange(total) - np.repeat(np.cumsum(later) - later, later) + 1
