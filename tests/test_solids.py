@@ -187,18 +187,14 @@ def test_pair_tests_never_call_meeting_triangles_apart(rng, shared, flat):
     """Random pairs sharing no corner, one or an edge, in space and in one plane: every pair proved
     apart has no common point beyond its shared corners (the linear program); and the proof is found
     for nearly every pair that is apart by a clear margin."""
-    ps, qs, meets = [], [], []
-    for p, q in _pairs(rng, shared, 300, flat):
-        ps.append(p)
-        qs.append(q)
-        meets.append(_meets_beyond(p, q, shared))
-    ta, tb = np.array(ps), np.array(qs)
+    pairs = list(_pairs(rng, shared, 300, flat))
+    ta, tb = np.array([p for p, _ in pairs]), np.array([q for _, q in pairs])
     ids = np.arange(3)
     fa = np.broadcast_to(ids, (len(ta), 3)).copy()
     fb = np.broadcast_to(ids + 3, (len(ta), 3)).copy()
     fb[:, :shared] = fa[:, :shared]
+    meets = np.array([_meets_beyond(p, q, shared) for p, q in pairs])
     apart = solids._apart(ta, tb, fa, fb)
-    meets = np.array(meets)
     assert not np.any(apart & (meets > 1e-9)), np.flatnonzero(apart & (meets > 1e-9))
     clear = meets < 0 if shared == 0 else meets < 1e-12
     assert clear.sum() > 30

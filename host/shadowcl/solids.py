@@ -18,7 +18,9 @@ certificate, computed once per mesh (:func:`solids`) and reused by every light:
 
 - **closed and consistently wound**: :attr:`shadowcl.topology.EdgeAdjacency.closed_faces`;
 - **embedded**: no two triangles of the component intersect except as neighbours must (along their
-  shared edge, at their shared corner). Candidate pairs are those whose boxes share a cell of a grid
+  shared edge, at their shared corner), judged on the corners the exact method's kernels test (float32,
+  relative to the mesh box's centre), not the caller's: rounding may make two faces that nearly touch
+  meet, and the proof must hold for the surface the walks see. Candidate pairs are those whose boxes share a cell of a grid
   per component; each pair is proved apart, in float64, with margins far above its rounding: by a
   separating axis (the 17 of two triangles, coplanar ones included) when they share no corner, by the
   far corner's side of the plane when they share an edge, by a plane through the shared corner when
@@ -50,7 +52,7 @@ from .geometry import Mesh
 from .lights import PointLight
 from .topology import edge_adjacency, solid_angles
 
-REL = 1e-9                  # margins, relative to the sizes involved: float64 rounding is ~1e-16 of them
+REL = 1e-9                  # float64 margins, relative to the sizes involved (its rounding is ~1e-16 of them)
 MAX_CELLS_PER_FACE = 16     # grid cells per face on average before a component's cells are made larger
 MAX_PAIRS_PER_FACE = 256    # candidate pairs (before repeats go) per face beyond which no component is certified;
 MAX_PAIRS = 1 << 24         # and in all (~40 bytes each): the bench scenes need 24-64 per face, 0.5-3 M in all
@@ -66,10 +68,10 @@ class Solids:
     """A mesh's certified solids: ``sigma`` (F,) int8, +1 or -1 for a face of a component certified
     embedded and wound outwards or inwards, 0 for every other face; ``label`` (F,) each face's
     component; ``low`` / ``high`` (C, 3) the components' boxes. For the certified faces only, ascending
-    ``ids`` (K,), their planes ``normals`` (K, 3, not unit) and ``offsets`` (K,) (``normals . x =
-    offsets``), ``rounding`` (K,): REL times the product of two edge lengths (a bound on the normal's
-    length), to be scaled by the size of the coordinates in a light's side test, and ``corner_size``
-    (K,) that size for the face's first corner."""
+    ``ids`` (K,), their first ``corners`` (K, 3), ``normals`` (K, 3, not unit) and ``scales`` (K,) (their
+    two edges' lengths' product, a bound on the normal's). All of it in the exact method's frame: the
+    corners relative to ``centre`` (the mesh box's), rounded to float32, as its kernels test them
+    (kernels/exact.cl triangle_records), and ``vertices`` likewise."""
 
     vertices: np.ndarray
     faces: np.ndarray
@@ -78,10 +80,10 @@ class Solids:
     low: np.ndarray
     high: np.ndarray
     ids: np.ndarray
+    corners: np.ndarray
     normals: np.ndarray
-    offsets: np.ndarray
-    rounding: np.ndarray
-    corner_size: np.ndarray
+    scales: np.ndarray
+    centre: np.ndarray
 
     @property
     def certified_faces(self) -> int:
@@ -95,15 +97,17 @@ class Solids:
             return None
         sigma = self.sigma[self.ids].astype(np.int64)
         if isinstance(light, PointLight):
-            position = np.asarray(light.position, dtype=np.float64)
-            side = self.normals @ position - self.offsets
-            bound = self.rounding * (np.abs(position).max() + self.corner_size)
+            # the light as the kernels have it (exact.py prepare: light - origin, in float32)
+            position = (np.asarray(light.position, dtype=np.float64) - self.centre).astype(np.float32).astype(float)
+            to_light = position - self.corners
+            side = np.einsum("ij,ij->i", self.normals, to_light)
+            bound = REL * self.scales * np.abs(to_light).max(axis=1)
             inside, unsure = self._light_sides(position)
             label = self.label[self.ids]
             sigma = np.where(unsure[label], 0, np.where(inside[label], -sigma, sigma))
         else:
-            side = self.normals @ -np.asarray(light.direction, dtype=np.float64)
-            bound = self.rounding
+            side = self.normals @ -np.asarray(light.direction, dtype=np.float32).astype(float)
+            bound = REL * self.scales
         culled = self.ids[(sigma != 0) & (sigma * side < -bound)]
         if len(culled) < MIN_CULLED * len(self.faces):
             return None
@@ -114,17 +118,18 @@ class Solids:
     def _light_sides(self, position: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(C,) bool twice: the light inside each certified component, and too near its surface to
         rely on that (within LIGHT_CLEARANCE of its size, where the winding number's float64 sum may
-        round to the wrong integer, or on it, where it is fractional)."""
+        round to the wrong integer; on the surface it is fractional)."""
         ncomp = len(self.low)
         inside, unsure = np.zeros(ncomp, dtype=bool), np.zeros(ncomp, dtype=bool)
         size = np.linalg.norm(self.high - self.low, axis=1)
-        pad = LIGHT_CLEARANCE * size[:, None]
+        clearance = LIGHT_CLEARANCE * size
+        pad = clearance[:, None]
         near = np.all((self.low - pad <= position) & (position <= self.high + pad), axis=1)
         certified = np.zeros(ncomp, dtype=bool)
         certified[self.label[self.ids]] = True
         for comp in np.flatnonzero(near & certified):
             tri = self.vertices[self.faces[self.label == comp]]
-            if triangle_distances(tri, position).min() <= LIGHT_CLEARANCE * size[comp]:
+            if triangle_distances(tri, position).min() <= clearance[comp]:
                 unsure[comp] = True
                 continue
             winding = solid_angles(tri, position).sum() / (4 * np.pi)
@@ -143,7 +148,8 @@ def solids(mesh: Mesh) -> Solids:
 
 def _certify(mesh: Mesh) -> Solids:
     adjacency = edge_adjacency(mesh)
-    vertices = mesh.vertices.astype(np.float64)
+    centre = 0.5 * (mesh.bounds[0] + mesh.bounds[1])            # the exact method's frame (exact.py prepare)
+    vertices = (mesh.vertices.astype(np.float64) - centre).astype(np.float32).astype(np.float64)
     faces = mesh.faces.astype(np.int64)
     label = np.asarray(adjacency.components, dtype=np.int64)
     ncomp = int(label.max()) + 1
@@ -166,9 +172,8 @@ def _certify(mesh: Mesh) -> Solids:
     ids = np.flatnonzero(sigma)
     tri = tris[ids]
     normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    edges = np.linalg.norm(tri[:, 1] - tri[:, 0], axis=1) * np.linalg.norm(tri[:, 2] - tri[:, 0], axis=1)
-    return Solids(vertices, faces, sigma, label, low, high, ids, normals, np.einsum("ij,ij->i", normals, tri[:, 0]),
-                  REL * edges, np.abs(tri[:, 0]).max(axis=1))
+    scales = np.linalg.norm(tri[:, 1] - tri[:, 0], axis=1) * np.linalg.norm(tri[:, 2] - tri[:, 0], axis=1)
+    return Solids(vertices, faces, sigma, label, low, high, ids, tri[:, 0], normals, scales, centre)
 
 
 def _volume_signs(tris, label, ncomp, low, high) -> np.ndarray:
@@ -265,6 +270,12 @@ def _apart(ta, tb, fa, fb) -> np.ndarray:
     return apart
 
 
+def _margin(size: np.ndarray, degree: int) -> np.ndarray:
+    """How far from 0 a product m . x must be to trust its sign, m of ``degree`` lengths and x of one,
+    made of differences of corners within ``size`` of each other: far above float64's rounding."""
+    return REL * size ** (degree + 1)
+
+
 def _separated(ta, tb, _same) -> np.ndarray:
     """Disjoint by a separating axis: the two normals, the nine edge-edge cross products and, for
     coplanar pairs, the six in-plane edge normals (complete for two triangles). Each axis is tried on
@@ -283,7 +294,7 @@ def _separated(ta, tb, _same) -> np.ndarray:
     for axis_of, degree in axes:
         axis = axis_of(rows)
         pa, pb = np.einsum("pkj,pj->pk", ta[rows], axis), np.einsum("pkj,pj->pk", tb[rows], axis)
-        gap = REL * size[rows] ** (degree + 1)
+        gap = _margin(size[rows], degree)
         done = (pa.max(axis=1) < pb.min(axis=1) - gap) | (pb.max(axis=1) < pa.min(axis=1) - gap)
         apart[rows[done]] = True
         rows = rows[~done]
@@ -303,8 +314,8 @@ def _apart_at_edge(ta, tb, same) -> np.ndarray:
     edge = q - p
     na = np.cross(edge, c - p)
     size = np.abs(np.stack([p, q, c, d], axis=1) - p[:, None]).max(axis=(1, 2))
-    off_plane = np.abs(np.einsum("ij,ij->i", na, d - p)) > REL * size ** 3
-    across = np.einsum("ij,ij->i", na, np.cross(edge, d - p)) < -REL * size ** 4
+    off_plane = np.abs(np.einsum("ij,ij->i", na, d - p)) > _margin(size, 2)
+    across = np.einsum("ij,ij->i", na, np.cross(edge, d - p)) < -_margin(size, 3)
     return off_plane | across
 
 
@@ -322,7 +333,7 @@ def _apart_at_corner(ta, tb, same) -> np.ndarray:
     def sides(r, m, degree, free_a, free_b):
         """For rows r: m's plane through v touches a along its rays not in free_a, b along those not in
         free_b; the free corners strictly on opposite sides, either way round."""
-        gap = REL * size[r] ** (degree + 1)
+        gap = _margin(size[r], degree)
         dot_a = [np.einsum("ij,ij->i", m, x[r]) for x in free_a]
         dot_b = [np.einsum("ij,ij->i", m, x[r]) for x in free_b]
         return np.any([np.all([s * d > gap for d in dot_a] + [-s * d > gap for d in dot_b], axis=0)
