@@ -110,18 +110,18 @@ def _surface_points(mesh: sc.Mesh, count: int, rng) -> tuple[np.ndarray, np.ndar
 @pytest.mark.parametrize("normals_given", [True, False])
 def test_cull_gives_the_same_masks(rng, normals_given):
     """The exact method with the cull against without, on receivers on every surface and in the air:
-    a ground slab, a ball, a box with holes, a closed cavity (inwards-wound inner wall) and the
-    finger (not certified: all its faces listed); point lights outside everything, inside the cavity and
-    inside the ball, and directional lights. The masks are the same bit for bit; every light lists
+    a ground slab, a ball, a box with holes, a closed cavity (inwards-wound inner wall) and an open
+    roof (not certified: listed for every light); point lights outside everything, inside the cavity
+    and inside the ball, and directional lights. The masks are the same bit for bit; every light lists
     fewer faces, and the light outside everything fewer than 60 % of the certified ones."""
     parts = [
         _solid(manifold3d.Manifold.cube((8, 0.2, 8), True).translate((0, -0.1, 0))),
-        _solid(manifold3d.Manifold.sphere(0.6, 40).translate((-1.5, 0.6, 0.8))),
+        _solid(manifold3d.Manifold.sphere(0.6, 16).translate((-1.5, 0.6, 0.8))),
         _solid((manifold3d.Manifold.cube((1.4, 1.4, 1.4), True) - manifold3d.Manifold.sphere(0.92, 40))
                .translate((0.5, 0.7, -0.5))),
         _solid((manifold3d.Manifold.cube((1.6, 1.6, 1.6), True) - manifold3d.Manifold.cube((1.2, 1.2, 1.2), True))
                .translate((2.2, 0.8, 1.5))),
-        sc.Mesh(_finger().vertices * 0.5 + np.float32((-1.0, 1.4, -2.0)), _finger().faces),
+        sc.Mesh([(-2.5, 1.8, -2.5), (-0.5, 1.8, -2.5), (-0.5, 1.9, -0.5), (-2.5, 1.9, -0.5)], [(0, 1, 2), (0, 2, 3)]),
     ]
     mesh = _joined(*parts)
     points, normals = _surface_points(mesh, 60_000, rng)
@@ -155,6 +155,24 @@ def test_which_faces_a_point_light_needs():
         assert np.array_equal(listed, np.flatnonzero(side > 0 if toward else side < 0)), position
     corner = mesh.vertices[mesh.faces[0, 0]].astype(np.float64)
     assert certificate.faces_for(sc.PointLight(corner)) is None
+
+
+def test_no_cull_where_too_few_faces_would_go():
+    """A light that would leave out under MIN_CULLED of the faces lists them all (a box among an open
+    sheet's faces, like bunny's ground beside its open model); a mesh whose closed parts hold under
+    twice that share is not even certified (the proofs would buy nothing)."""
+    sheet = trimesh.creation.icosphere(3)
+    sheet = sc.Mesh(sheet.vertices, sheet.faces[sheet.vertices[sheet.faces].mean(axis=1)[:, 2] > -0.5])  # open
+    box = _solid(manifold3d.Manifold.cube((0.5, 0.5, 0.5), True).translate((3, 0, 0)))
+    few = _joined(sheet, box)
+    assert solids.solids(few).certified_faces == 0
+    ball = _solid(manifold3d.Manifold.sphere(1.0, 24).translate((0, 0, 3)))
+    some = _joined(ball, sc.Mesh(sheet.vertices, sheet.faces[: len(ball.faces) // 3]))
+    certificate = solids.solids(some)
+    assert certificate.certified_faces == len(ball.faces)
+    light = sc.DirectionalLight((0.0, 0.0, -1.0))
+    assert certificate.faces_for(light) is not None
+    assert solids.solids(_joined(ball, sc.Mesh(sheet.vertices, sheet.faces[: len(ball.faces)]))).faces_for(light) is None
 
 
 # The pair tests against a linear program: how far two triangles meet beyond what they share --------------

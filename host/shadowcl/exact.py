@@ -243,9 +243,9 @@ class ExactMethod(Method):
                          "~50 ms more to save 2-5 % of a query on light_inside: see the module docstring)"),
         "cull": (False, "list only the faces of certified solids that every blocked segment crosses (shadowcl."
                         "solids: the faces turned towards a light outside a closed, embedded solid), about half of "
-                        "them; the same answers. The certificate is made once per mesh, in NumPy (0.02-1.1 s on the "
-                        "bench scenes), so it pays over many lights: shadow_counts and shadow_matrix turn it on "
-                        "from CULL_FROM_LIGHTS lights unless told"),
+                        "them; the same answers. The certificate is made once per mesh, in NumPy (0.01-0.8 s on the "
+                        "bench scenes: several one-shot calls), so it pays over many lights: shadow_counts and "
+                        "shadow_matrix turn it on from CULL_FROM_LIGHTS lights unless told"),
     }
 
     def __init__(self, device, **params):

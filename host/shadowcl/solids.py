@@ -34,10 +34,15 @@ certificate, computed once per mesh (:func:`solids`) and reused by every light:
   angles may round to the wrong side.
 
 A face within rounding of the light's plane (a directional light along it, a point light in it) is
-listed either way. Faces of open components, and of components not certified, are always listed. A
-light that would leave out fewer than ``MIN_CULLED`` of all faces (bunny on its ground: 10 of 69,463,
-its model being open) lists them all: reordering and uploading the faces costs ~1-2 ms per 100 k,
-more than a few culled faces save (reasoned from those two costs, not tuned).
+listed either way. Faces of open components, and of components not certified, are always listed.
+
+A light that would leave out fewer than ``MIN_CULLED`` of all faces lists them all, and a mesh whose
+closed components hold fewer than twice that share is not certified (no light could then leave out
+enough): reordering and uploading the faces and the side tests cost 2-3 ms a light per 100 k faces.
+Measured on four scenes (bench/results/cull.md), a judgment between them, not a fit: ogre, 27 % of its
+faces left out, gained nothing (75.9 -> 81.1 ms a light with normals, 77.3 -> 76.9 without); default
+(54 %), city_block (46 %) and light_inside (69 %) gained 9-20 %. Bunny on its ground would leave out
+10 of 69,463 (its model is open).
 """
 
 from __future__ import annotations
@@ -58,7 +63,7 @@ MAX_PAIRS_PER_FACE = 256    # candidate pairs (before repeats go) per face beyon
 MAX_PAIRS = 1 << 24         # and in all (~40 bytes each): the bench scenes need 24-64 per face, 0.5-3 M in all
 PAIRS_PER_PASS = 1 << 18    # pairs proved apart at a time
 LIGHT_CLEARANCE = 1e-6     # a point light nearer a solid than this share of its box diagonal lists all its faces
-MIN_CULLED = 0.1           # culls leaving out fewer faces than this share list them all (reasoned: see faces_for)
+MIN_CULLED = 1 / 3         # culls leaving out fewer faces than this share list them all (measured: module doc)
 
 _CACHE: "weakref.WeakKeyDictionary[Mesh, Solids]" = weakref.WeakKeyDictionary()
 
@@ -164,6 +169,8 @@ def _certify(mesh: Mesh) -> Solids:
     good[label[adjacency.collapsed_faces]] = False
     sigma_of = _volume_signs(tris, label, ncomp, low, high)
     good &= sigma_of != 0
+    if np.count_nonzero(good[label]) < 2 * MIN_CULLED * len(faces):     # too few to leave out enough
+        good[:] = False
     if good.any():
         candidates = np.flatnonzero(good[label])
         bad = _components_not_embedded(tris, faces, label, candidates, low, high)
