@@ -318,8 +318,7 @@ class ExactMethod(Method):
             dev.queue, (len(faces),), None, dev.to_device(vertices), dev.to_device(faces), np.int32(len(faces)),
             *(np.float32(c) for c in light_vec), tris_dev, records)
         t1 = time.perf_counter()
-        # Views and grid
-        # Views and grid fitted to every face: receivers lie on the culled ones too (measured on light_inside
+        # Views and grid, fitted to every face: receivers lie on the culled ones too (measured on light_inside
         # without normals, fitted to the listed faces only: 49 -> 59 ms a light, some views 4 x 4 cells)
         views = lightspace.fit_to_footprint(dev, views, tris_dev, len(faces))
         cells = lightspace.pick_cell_count(len(faces), self.expected_receivers)
