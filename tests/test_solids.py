@@ -142,6 +142,43 @@ def test_cull_gives_the_same_masks(rng, normals_given):
     assert outside["listed_triangles"] < len(mesh.faces) - 0.4 * certified
 
 
+def _rotated_yard(seed: int):
+    """A box and a ball resting on a ground quad, the whole turned at random (no axis-aligned luck), the
+    rotation, and 20 k receivers on the ground."""
+    from scipy.spatial.transform import Rotation
+
+    base = _joined(_solid(manifold3d.Manifold.cube((1, 1, 1)).translate((0.5, 0, -0.5))),
+                   _solid(manifold3d.Manifold.sphere(0.4, 24).translate((-1.5, 0.4, 0))),
+                   sc.Mesh([(-4, 0, -4), (4, 0, -4), (4, 0, 4), (-4, 0, 4)], [(0, 2, 1), (0, 3, 2)]))
+    rotation = Rotation.random(random_state=seed).as_matrix()
+    ground = np.random.default_rng(seed).uniform((-4, 0, -4), (4, 0, 4), (20_000, 3))
+    ground[:, 1] = 0
+    return sc.Mesh(base.vertices.astype(np.float64) @ rotation.T, base.faces), rotation, ground @ rotation.T
+
+
+@pytest.mark.parametrize("height", [0.0, 1e-9, 1e-7, 1e-6, 1e-5, -1e-7])
+def test_lights_nearly_edge_on_to_a_face_list_its_solid(height):
+    """A point light just above (or in, or under) the ground's plane, which is the box's bottom face's,
+    and a sun travelling along it: the kernels cannot tell the light's side of those faces, the
+    walk may miss a crossing there, so the cull lists such a solid whole. Found by a red team: 57 of
+    40 k receivers lit that are in shadow, with the light 1e-7 above the floor, before this rule."""
+    mesh, rotation, points = _rotated_yard(2)
+    for light in (sc.PointLight(rotation @ np.array([0.1, height, 0.3])),
+                  sc.DirectionalLight(rotation @ np.array([-1.0, height, 0.2]))):
+        culled = sc.shadow_mask(mesh, light, points, cull=True)
+        assert np.array_equal(culled, sc.shadow_mask(mesh, light, points, cull=False)), light
+
+
+def test_no_cull_with_the_leaky_test():
+    """dot5 leaks through shared edges, and the face it would have stopped the ray at may be one the
+    cull leaves out: with test='dot5' every face is listed."""
+    mesh, _, points = _rotated_yard(3)
+    light = sc.PointLight((0.3, 4.0, 0.2))
+    assert sc.prepare(mesh, light, eps=1e-4, cull=True)._instance.stats["listed_triangles"] < len(mesh.faces)
+    dot5 = sc.prepare(mesh, light, eps=1e-4, cull=True, test="dot5")
+    assert dot5._instance.stats["listed_triangles"] == len(mesh.faces)
+
+
 def test_which_faces_a_point_light_needs():
     """Outside a certified solid: the faces turned towards the light; inside it (in the material of a
     box with a ball cut out): those turned away; on its surface (winding number 1/2): every face."""

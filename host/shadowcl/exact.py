@@ -243,7 +243,8 @@ class ExactMethod(Method):
                          "~50 ms more to save 2-5 % of a query on light_inside: see the module docstring)"),
         "cull": (False, "list only the faces of certified solids that every blocked segment crosses (shadowcl."
                         "solids: the faces turned towards a light outside a closed, embedded solid), about half of "
-                        "them; the same answers. The certificate is made once per mesh, in NumPy (0.01-0.8 s on the "
+                        "them; the same answers (with test='watertight' only: dot5's leaks would show). The "
+                        "certificate is made once per mesh, in NumPy (0.01-0.8 s on the "
                         "bench scenes: several one-shot calls), so it pays over many lights: shadow_counts and "
                         "shadow_matrix turn it on from CULL_FROM_LIGHTS lights unless told"),
     }
@@ -354,7 +355,8 @@ class ExactMethod(Method):
         """``mesh.faces`` reordered so that those to list for ``light`` come first, and how many they are:
         every face, or with ``cull``, those the light needs of the certified solids
         (:meth:`shadowcl.solids.Solids.faces_for`) and every other face."""
-        listed = solids(mesh).faces_for(light) if self.cull else None
+        # dot5 leaks through shared edges (module doc), and an entry face it would have hit is not listed
+        listed = solids(mesh).faces_for(light) if self.cull and self.test == "watertight" else None
         if listed is None:
             return mesh.faces, len(mesh.faces)
         culled = np.ones(len(mesh.faces), dtype=bool)

@@ -33,8 +33,10 @@ certificate, computed once per mesh (:func:`solids`) and reused by every light:
   the winding number is fractional (1/8 at a box's corner), and very near it the float64 sum of solid
   angles may round to the wrong side.
 
-A face within rounding of the light's plane (a directional light along it, a point light in it) is
-listed either way. Faces of open components, and of components not certified, are always listed.
+A solid with a face nearly edge-on to the light (within ``EDGE_ON`` times the kernels' own bound of the
+light's side of its plane) lists all its faces: the walk may miss such a face where it is the crossing
+(its cone test is oriented by that side), and without the cull the face turned away catches the
+segment. Faces of open components, and of components not certified, are always listed.
 
 A light that would leave out fewer than ``MIN_CULLED`` of all faces lists them all, and a mesh whose
 closed components hold fewer than twice that share is not certified (no light could then leave out
@@ -63,6 +65,8 @@ MAX_PAIRS_PER_FACE = 256    # candidate pairs (before repeats go) per face beyon
 MAX_PAIRS = 1 << 24         # and in all (~40 bytes each): the bench scenes need 24-64 per face, 0.5-3 M in all
 PAIRS_PER_PASS = 1 << 18    # pairs proved apart at a time
 LIGHT_CLEARANCE = 1e-6     # a point light nearer a solid than this share of its box diagonal lists all its faces
+EDGE_ON = 4                # a face within this many times the kernels' plane bound of the light lists its solid
+KERNEL_NORMAL_ULPS = 8     # kernels/ray_triangle.h NORMAL_ULPS: the plane test's allowance for a normal's lean
 MIN_CULLED = 1 / 3         # culls leaving out fewer faces than this share list them all (measured: module doc)
 
 _CACHE: "weakref.WeakKeyDictionary[Mesh, Solids]" = weakref.WeakKeyDictionary()
@@ -73,8 +77,9 @@ class Solids:
     """A mesh's certified solids: ``sigma`` (F,) int8, +1 or -1 for a face of a component certified
     embedded and wound outwards or inwards, 0 for every other face; ``label`` (F,) each face's
     component; ``low`` / ``high`` (C, 3) the components' boxes. For the certified faces only, ascending
-    ``ids`` (K,), their first ``corners`` (K, 3), ``normals`` (K, 3, not unit) and ``scales`` (K,) (their
-    two edges' lengths' product, a bound on the normal's). All of it in the exact method's frame: the
+    ``ids`` (K,), their first ``corners`` (K, 3), ``normals`` (K, 3, not unit), the normals' ``lengths``
+    (K,) and ``plane_rel`` (K,), the relative bound of the kernels' plane test (kernels/exact.cl
+    wt_record: 1e-6 plus how far the float32 normal may lean). All of it in the exact method's frame: the
     corners relative to ``centre`` (the mesh box's), rounded to float32, as its kernels test them
     (kernels/exact.cl triangle_records), and ``vertices`` likewise."""
 
@@ -87,7 +92,8 @@ class Solids:
     ids: np.ndarray
     corners: np.ndarray
     normals: np.ndarray
-    scales: np.ndarray
+    lengths: np.ndarray
+    plane_rel: np.ndarray
     centre: np.ndarray
 
     @property
@@ -101,19 +107,26 @@ class Solids:
         if len(self.ids) < MIN_CULLED * len(self.faces):
             return None
         sigma = self.sigma[self.ids].astype(np.int64)
+        label = self.label[self.ids]
         if isinstance(light, PointLight):
             # the light as the kernels have it (exact.py prepare: light - origin, in float32)
             position = (np.asarray(light.position, dtype=np.float64) - self.centre).astype(np.float32).astype(float)
             to_light = position - self.corners
             side = np.einsum("ij,ij->i", self.normals, to_light)
-            bound = REL * self.scales * np.abs(to_light).max(axis=1)
+            reach = np.abs(to_light).sum(axis=1)                  # the kernels' bound scales by |light - v0|_1
             inside, unsure = self._light_sides(position)
-            label = self.label[self.ids]
-            sigma = np.where(unsure[label], 0, np.where(inside[label], -sigma, sigma))
+            sigma = np.where(inside[label], -sigma, sigma)
         else:
             side = self.normals @ -np.asarray(light.direction, dtype=np.float32).astype(float)
-            bound = REL * self.scales
-        culled = self.ids[(sigma != 0) & (sigma * side < -bound)]
+            reach = 1.0
+            unsure = np.zeros(len(self.low), dtype=bool)
+        # A face nearly edge-on to the light, within EDGE_ON times the kernels' own bound of its side: its
+        # cone test is oriented by that side, and a walk may miss it where it is the crossing; without the
+        # cull the face turned away catches the segment (bench/cull.py's red team: 57 of 40 k receivers
+        # on a floor with the light 1e-7 above it). Its whole component is listed.
+        edge_on = np.abs(side) <= EDGE_ON * self.plane_rel * self.lengths * reach
+        unsure[label[edge_on]] = True
+        culled = self.ids[~unsure[label] & (sigma * side < 0)]
         if len(culled) < MIN_CULLED * len(self.faces):
             return None
         keep = np.ones(len(self.faces), dtype=bool)
@@ -179,8 +192,11 @@ def _certify(mesh: Mesh) -> Solids:
     ids = np.flatnonzero(sigma)
     tri = tris[ids]
     normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    scales = np.linalg.norm(tri[:, 1] - tri[:, 0], axis=1) * np.linalg.norm(tri[:, 2] - tri[:, 0], axis=1)
-    return Solids(vertices, faces, sigma, label, low, high, ids, tri[:, 0], normals, scales, centre)
+    lengths = np.linalg.norm(normals, axis=1)
+    edges = np.linalg.norm(tri[:, 1] - tri[:, 0], axis=1) * np.linalg.norm(tri[:, 2] - tri[:, 0], axis=1)
+    with np.errstate(divide="ignore"):
+        plane_rel = 1e-6 + KERNEL_NORMAL_ULPS * np.finfo(np.float32).eps * edges / lengths
+    return Solids(vertices, faces, sigma, label, low, high, ids, tri[:, 0], normals, lengths, plane_rel, centre)
 
 
 def _volume_signs(tris, label, ncomp, low, high) -> np.ndarray:
