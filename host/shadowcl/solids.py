@@ -20,11 +20,11 @@ certificate, computed once per mesh (:func:`solids`) and reused by every light:
 - **embedded**: no two triangles of the component intersect except as neighbours must (along their
   shared edge, at their shared corner), judged on the corners the exact method's kernels test (float32,
   relative to the mesh box's centre), not the caller's: rounding may make two faces that nearly touch
-  meet, and the proof must hold for the surface the walks see. Candidate pairs are those whose boxes share a cell of a grid
-  per component; each pair is proved apart, in float64, with margins far above its rounding: by a
-  separating axis (the 17 of two triangles, coplanar ones included) when they share no corner, by the
-  far corner's side of the plane when they share an edge, by a plane through the shared corner when
-  they share one. A pair that cannot be proved apart (touching, or too close to call) leaves its
+  meet, and the proof must hold for the surface the walks see. Candidate pairs are those whose boxes
+  share a cell of a grid per component; each pair is proved apart, in float64, with margins far above
+  its rounding: by a separating axis (the 17 of two triangles, coplanar ones included) when they share
+  no corner, by the far corner's side of the plane when they share an edge, by a plane through the
+  shared corner when they share one. A pair that cannot be proved apart (touching, or too close to call) leaves its
   component uncertified: the answer stays exact, only slower;
 - **the sign**: the component's signed volume, which must be clearly non-zero;
 - **the light's side** (per light): outside the component's box, or its winding number (solid angles,
@@ -43,7 +43,7 @@ closed components hold fewer than twice that share is not certified (no light co
 enough): reordering and uploading the faces and the side tests cost 2-3 ms a light per 100 k faces.
 Measured on four scenes (bench/results/cull.md), a judgment between them, not a fit: ogre, 27 % of its
 faces left out, gained nothing (75.9 -> 81.1 ms a light with normals, 77.3 -> 76.9 without); default
-(54 %), city_block (46 %) and light_inside (69 %) gained 9-20 %. Bunny on its ground would leave out
+(54 %), city_block (46 %) and light_inside (69 %) gained 4-20 %. Bunny on its ground would leave out
 10 of 69,463 (its model is open).
 """
 
