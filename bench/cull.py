@@ -86,7 +86,7 @@ def main(argv=None) -> None:
         points, normals = rx.receivers(scene, 1_000_000, 200_000, 0)
         eps = default_eps(scene.mesh.bounds)
         row = dict(scene=name, **certificate(scene.mesh))
-        listed = solids.solids(scene.mesh).faces_for(scene.lights[0])
+        listed = solids.solids(scene.mesh).faces_for(scene.lights[0], np.stack([points.min(axis=0), points.max(axis=0)]))
         row["listed_faces"] = len(scene.mesh.faces) if listed is None else len(listed)
         lights = nearby_lights(scene.lights[0], float(np.linalg.norm(np.ptp(scene.mesh.bounds, axis=0))),
                                args.lights, rng)

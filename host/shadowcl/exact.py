@@ -296,7 +296,7 @@ class ExactMethod(Method):
         origin = 0.5 * (mesh.bounds[0] + mesh.bounds[1])
         scale = bounds_diagonal(union)
         vertices = (mesh.vertices.astype(np.float64) - origin).astype(np.float32)
-        faces, ntris = self._faces_to_list(mesh, light)      # the views see every face, the lists ntris
+        faces, ntris = self._faces_to_list(mesh, light, box)  # the views see every face, the lists ntris
         views = lightspace.fit_views(light, box, origin, scale)
         # One program for every kernel of this method (its options are known once the views' kind is)
         options = views.options + (
@@ -351,12 +351,13 @@ class ExactMethod(Method):
             upload_s=t1 - t0, views_s=t2 - t1, lists_s=t3 - t2, prepare_s=t3 - t0,
         )
 
-    def _faces_to_list(self, mesh: Mesh, light) -> tuple[np.ndarray, int]:
+    def _faces_to_list(self, mesh: Mesh, light, receiver_bounds) -> tuple[np.ndarray, int]:
         """``mesh.faces`` reordered so that those to list for ``light`` come first, and how many they are:
-        every face, or with ``cull``, those the light needs of the certified solids
-        (:meth:`shadowcl.solids.Solids.faces_for`) and every other face."""
+        every face, or with ``cull``, those the light needs of the certified solids for receivers in
+        ``receiver_bounds`` (:meth:`shadowcl.solids.Solids.faces_for`) and every other face."""
         # dot5 leaks through shared edges (module doc), and an entry face it would have hit is not listed
-        listed = solids(mesh).faces_for(light) if self.cull and self.test == "watertight" else None
+        cull = self.cull and self.test == "watertight"
+        listed = solids(mesh).faces_for(light, receiver_bounds) if cull else None
         if listed is None:
             return mesh.faces, len(mesh.faces)
         culled = np.ones(len(mesh.faces), dtype=bool)

@@ -29,9 +29,10 @@ certificate, computed once per mesh (:func:`solids`) and reused by every light:
 - **the sign**: the component's signed volume, which must be clearly non-zero;
 - **the light's side** (per light): outside the component's box, or its winding number (solid angles,
   :func:`shadowcl.topology.solid_angles`; 0 or ``sigma`` off an embedded surface). A point light within
-  ``LIGHT_CLEARANCE`` of the component's size from its triangles lists all its faces: on the surface
-  the winding number is fractional (1/8 at a box's corner), and very near it the float64 sum of solid
-  angles may round to the wrong side.
+  ``LIGHT_CLEARANCE`` of the component's size, or ``NEAR_LIGHT`` of its reach, from its triangles lists
+  all its faces: on the surface the winding number is fractional (1/8 at a box's corner), very near it
+  the float64 sum of solid angles may round to the wrong side, and the walks' float32 segments may end
+  short of a face the light nearly touches (:meth:`Solids._light_sides`).
 
 A solid with a face nearly edge-on to the light (within ``EDGE_ON`` times the kernels' own bound of the
 light's side of its plane) lists all its faces: the walk may miss such a face where it is the crossing
@@ -64,7 +65,8 @@ MAX_CELLS_PER_FACE = 16     # grid cells per face on average before a component'
 MAX_PAIRS_PER_FACE = 256    # candidate pairs (before repeats go) per face beyond which no component is certified;
 MAX_PAIRS = 1 << 24         # and in all (~40 bytes each): the bench scenes need 24-64 per face, 0.5-3 M in all
 PAIRS_PER_PASS = 1 << 18    # pairs proved apart at a time
-LIGHT_CLEARANCE = 1e-6     # a point light nearer a solid than this share of its box diagonal lists all its faces
+LIGHT_CLEARANCE = 1e-6     # a point light nearer a solid than this share of its box diagonal lists all its faces,
+NEAR_LIGHT = 1e-4          # or nearer than this share of its reach (the farthest receiver or face from it)
 EDGE_ON = 4                # a face within this many times the kernels' plane bound of the light lists its solid
 KERNEL_NORMAL_ULPS = 8     # kernels/ray_triangle.h NORMAL_ULPS: the plane test's allowance for a normal's lean
 MIN_CULLED = 1 / 3         # culls leaving out fewer faces than this share list them all (measured: module doc)
@@ -100,10 +102,10 @@ class Solids:
     def certified_faces(self) -> int:
         return len(self.ids)
 
-    def faces_for(self, light) -> np.ndarray | None:
-        """Ids of the faces ``light`` needs listed (ascending), or None to list every face: when the
-        light would leave fewer than MIN_CULLED of them out, the lists would save less than the
-        reordered faces cost."""
+    def faces_for(self, light, receiver_bounds: np.ndarray) -> np.ndarray | None:
+        """Ids of the faces ``light`` needs listed (ascending) for receivers in ``receiver_bounds`` ((2, 3),
+        the mesh's frame), or None to list every face: when the light would leave fewer than
+        MIN_CULLED of them out, the lists would save less than the reordered faces cost."""
         if len(self.ids) < MIN_CULLED * len(self.faces):
             return None
         sigma = self.sigma[self.ids].astype(np.int64)
@@ -114,7 +116,7 @@ class Solids:
             to_light = position - self.corners
             side = np.einsum("ij,ij->i", self.normals, to_light)
             reach = np.abs(to_light).sum(axis=1)                  # the kernels' bound scales by |light - v0|_1
-            inside, unsure = self._light_sides(position)
+            inside, unsure = self._light_sides(position, self._reach(position, receiver_bounds))
             sigma = np.where(inside[label], -sigma, sigma)
         else:
             side = self.normals @ -np.asarray(light.direction, dtype=np.float32).astype(float)
@@ -133,14 +135,27 @@ class Solids:
         keep[culled] = False
         return np.flatnonzero(keep)
 
-    def _light_sides(self, position: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _reach(self, position: np.ndarray, receiver_bounds: np.ndarray) -> float:
+        """The farthest a receiver or a corner may lie from the light at ``position`` (frame coordinates)."""
+        box = np.asarray(receiver_bounds, dtype=np.float64) - self.centre
+        low = np.minimum(box[0], self.vertices.min(axis=0))
+        high = np.maximum(box[1], self.vertices.max(axis=0))
+        return float(np.linalg.norm(np.maximum(np.abs(low - position), np.abs(high - position))))
+
+    def _light_sides(self, position: np.ndarray, reach: float) -> tuple[np.ndarray, np.ndarray]:
         """(C,) bool twice: the light inside each certified component, and too near its surface to
-        rely on that (within LIGHT_CLEARANCE of its size, where the winding number's float64 sum may
-        round to the wrong integer; on the surface it is fractional)."""
+        rely on that. Within LIGHT_CLEARANCE of the component's size, the winding number's float64 sum
+        may round to the wrong integer (on the surface it is fractional). Within NEAR_LIGHT of
+        ``reach``, the walks' float32 segments end within ~6e-8 of their length of the light, and near
+        an edge the fine cells' masks and the watertight test may disagree on which face a crossing
+        is in: a red team lost shadows with lights 1.2e-6 to 1e-5 of the scene off a sphere's vertex
+        and 1e-5 of a small cube's size above its face (in a scene 300 times larger), none at 2e-5
+        of the scene; NEAR_LIGHT leaves a factor of 5. Without the cull the face the segment entered
+        by catches it."""
         ncomp = len(self.low)
         inside, unsure = np.zeros(ncomp, dtype=bool), np.zeros(ncomp, dtype=bool)
         size = np.linalg.norm(self.high - self.low, axis=1)
-        clearance = LIGHT_CLEARANCE * size
+        clearance = np.maximum(LIGHT_CLEARANCE * size, NEAR_LIGHT * reach)
         pad = clearance[:, None]
         near = np.all((self.low - pad <= position) & (position <= self.high + pad), axis=1)
         certified = np.zeros(ncomp, dtype=bool)
