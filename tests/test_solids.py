@@ -38,7 +38,9 @@ def _certified_sigma(mesh: sc.Mesh) -> set:
 
 def test_certifies_embedded_solids_and_their_winding():
     """manifold3d's solids (embedded by construction), CSG with holes and a cavity, disjoint parts that
-    overlap one another (each component is judged alone): every face certified, +1; reversed, -1."""
+    overlap one another (each component is judged alone), flat faces made of grids of triangles (whose
+    corners' fans have collinear edges: only the sectors' test proves those apart): every face
+    certified, +1; reversed, -1."""
     cases = {
         "sphere": _solid(manifold3d.Manifold.sphere(1.0, 48)),
         "box": _solid(manifold3d.Manifold.cube((2, 1, 3), True)),
@@ -46,6 +48,9 @@ def test_certifies_embedded_solids_and_their_winding():
         "cavity": _solid(manifold3d.Manifold.cube((2, 2, 2), True) - manifold3d.Manifold.cube((1.5, 1.5, 1.5), True)),
         "overlapping parts": _joined(_solid(manifold3d.Manifold.sphere(1.0, 32)),
                                      _solid(manifold3d.Manifold.sphere(1.0, 32).translate((0.5, 0, 0)))),
+        "grid-triangulated box": _solid(manifold3d.Manifold.cube((1, 1, 1), True).refine(4)),
+        "stair": _solid(manifold3d.Manifold.cube((3, 1, 1)) + manifold3d.Manifold.cube((2, 1, 1)).translate((0, 0, 1))
+                        + manifold3d.Manifold.cube((1, 1, 1)).translate((0, 0, 2))),
     }
     for name, mesh in cases.items():
         sigma = solids.solids(mesh).sigma
@@ -204,6 +209,22 @@ def test_no_cull_with_the_leaky_test():
     assert sc.prepare(mesh, light, eps=1e-4, cull=True)._instance.stats["listed_triangles"] < len(mesh.faces)
     dot5 = sc.prepare(mesh, light, eps=1e-4, cull=True, test="dot5")
     assert dot5._instance.stats["listed_triangles"] == len(mesh.faces)
+
+
+def test_cull_on_grid_triangulated_solids(rng):
+    """A stair of boxes and a grid-triangulated box (certified through their corners' sectors): the masks
+    with and without the cull are the same, and the cull is made."""
+    mesh = _joined(_solid(manifold3d.Manifold.cube((3, 1, 1)) + manifold3d.Manifold.cube((2, 1, 1)).translate((0, 0, 1))
+                          + manifold3d.Manifold.cube((1, 1, 1)).translate((0, 0, 2))),
+                   _solid(manifold3d.Manifold.cube((1, 1, 1), True).refine(4).translate((0.5, 3, 0.5))))
+    points, normals = _surface_points(mesh, 30_000, rng)
+    points = np.r_[points, rng.uniform((-2, -2, -2), (5, 5, 5), (10_000, 3))]
+    normals = np.r_[normals, rng.normal(size=(10_000, 3))]
+    for light in (sc.PointLight((4.0, 2.0, 5.0)), sc.PointLight((-1.0, 1.5, 0.5)), sc.DirectionalLight((-0.3, 0.5, -1.0))):
+        for given in (normals, None):
+            culled = sc.shadow_mask(mesh, light, points, given, eps=1e-4, cull=True)
+            assert np.array_equal(culled, sc.shadow_mask(mesh, light, points, given, eps=1e-4, cull=False)), light
+        assert sc.prepare(mesh, light, eps=1e-4, cull=True)._instance.stats["listed_triangles"] < len(mesh.faces)
 
 
 def test_which_faces_a_point_light_needs():

@@ -392,5 +392,31 @@ def _apart_at_corner(ta, tb, same) -> np.ndarray:
         apart[rows[done]] = True
         rows = rows[~done]
         if not len(rows):
-            break
+            return apart
+    apart[rows] = _sectors_apart(a1[rows], a2[rows], b1[rows], b2[rows], na[rows])
     return apart
+
+
+def _sectors_apart(a1, a2, b1, b2, na) -> np.ndarray:
+    """Wedges v + cone(a1, a2) and v + cone(b1, b2) that meet only at v, by their directions in a's plane:
+    b's wedge projected along a's normal ``na`` spans a sector disjoint from a's, by a margin. Sound:
+    the projection keeps every point of a's wedge, so a common point other than v would give a common
+    direction. The planes above miss coplanar fans whose edges are collinear through v (a grid's
+    triangles round a vertex, two sectors opposite each other): every plane along an edge of one holds
+    an edge of the other."""
+    u = a1 / np.linalg.norm(a1, axis=1, keepdims=True)
+    w = np.cross(na, a1)
+    w /= np.linalg.norm(w, axis=1, keepdims=True)
+
+    def angle(x):
+        along, across = np.einsum("ij,ij->i", x, u), np.einsum("ij,ij->i", x, w)
+        clear = np.hypot(along, across) > 1e-6 * np.linalg.norm(x, axis=1)   # not along the normal
+        return np.mod(np.arctan2(across, along), 2 * np.pi), clear
+
+    (alpha, _), (beta1, clear1), (beta2, clear2) = angle(a2), angle(b1), angle(b2)
+    turn = np.mod(beta2 - beta1, 2 * np.pi)
+    start = np.where(turn < np.pi, beta1, beta2)               # b's sector, counter-clockwise from start
+    span = np.minimum(turn, 2 * np.pi - turn)
+    margin = 1e-9
+    return (clear1 & clear2 & (span < np.pi - margin) & (start > alpha + margin)
+            & (start + span < 2 * np.pi - margin))
