@@ -105,5 +105,15 @@ class Mesh:
         return Mesh(vertices, faces)
 
 
+def per_mesh(cache, mesh: Mesh, build):
+    """``cache[mesh]`` (a ``weakref.WeakKeyDictionary``), made by ``build(mesh)`` on first use: what is
+    derived from a mesh once (a :class:`Mesh` is immutable) and dropped with it."""
+    value = cache.get(mesh)
+    if value is None:
+        value = build(mesh)
+        cache[mesh] = value
+    return value
+
+
 def bounds_diagonal(bounds: np.ndarray) -> float:
     return float(np.linalg.norm(bounds[1] - bounds[0]))

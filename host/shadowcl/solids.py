@@ -56,7 +56,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .frame import triangle_distances
-from .geometry import Mesh
+from .geometry import Mesh, per_mesh
 from .lights import PointLight
 from .topology import edge_adjacency, solid_angles
 
@@ -138,8 +138,8 @@ class Solids:
     def _reach(self, position: np.ndarray, receiver_bounds: np.ndarray) -> float:
         """The farthest a receiver or a corner may lie from the light at ``position`` (frame coordinates)."""
         box = np.asarray(receiver_bounds, dtype=np.float64) - self.centre
-        low = np.minimum(box[0], self.vertices.min(axis=0))
-        high = np.maximum(box[1], self.vertices.max(axis=0))
+        low = np.minimum(box[0], self.low.min(axis=0))
+        high = np.maximum(box[1], self.high.max(axis=0))
         return float(np.linalg.norm(np.maximum(np.abs(low - position), np.abs(high - position))))
 
     def _light_sides(self, position: np.ndarray, reach: float) -> tuple[np.ndarray, np.ndarray]:
@@ -172,11 +172,7 @@ class Solids:
 
 def solids(mesh: Mesh) -> Solids:
     """The :class:`Solids` of ``mesh``, certified once per mesh (a :class:`Mesh` is immutable)."""
-    cached = _CACHE.get(mesh)
-    if cached is None:
-        cached = _certify(mesh)
-        _CACHE[mesh] = cached
-    return cached
+    return per_mesh(_CACHE, mesh, _certify)
 
 
 def _certify(mesh: Mesh) -> Solids:

@@ -37,7 +37,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .geometry import Mesh
+from .geometry import Mesh, per_mesh
 
 CONCAVE_SINE = 1e-6     # concave_edges: smallest fold (sine) that counts; see the module doc
 
@@ -185,11 +185,7 @@ def _half_edges(faces: np.ndarray, face_ids: np.ndarray):
 
 def edge_adjacency(mesh: Mesh) -> EdgeAdjacency:
     """The :class:`EdgeAdjacency` of ``mesh``, built once per mesh (sort-based, vectorised)."""
-    cached = _CACHE.get(mesh)
-    if cached is None:
-        cached = _build_adjacency(mesh)
-        _CACHE[mesh] = cached
-    return cached
+    return per_mesh(_CACHE, mesh, _build_adjacency)
 
 
 def _build_adjacency(mesh: Mesh) -> EdgeAdjacency:
