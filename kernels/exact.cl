@@ -306,6 +306,135 @@ INLINE void load_starts8(__global const Start *start, lfloat *x, lfloat *y, lflo
 }
 #endif
 
+/* Lit without a walk. Each coarse cell may have a plane (exact_cell_planes) with every triangle that a
+ * receiver of the cell can walk (the coarse cell's list and its fine cells' lists) on or behind it, in
+ * exact arithmetic on the triangles' float32 corners: a lane whose tested part of the segment stays
+ * strictly in front of it meets none of them, and is lit. Most receivers on a ground plane, or on a
+ * solid's face turned towards the light, are decided so in the count pass and never binned, filled or
+ * walked. Along the segment f(x) = n.x - c is f(s + t d) = f(s) + t n.d; with lower bounds A <= f(s) and
+ * 0 <= B <= n.d (their float32 sums of 4 products, FP_CONTRACT off, are off by at most 4 ulps of the
+ * terms' magnitudes; PLANE_ULPS allowed), f is at least A + t B from the walk's tmin on, and tmin >=
+ * eps / D for D = |d|_1 rounded up (>= |d|, so no square root; 1 for a directional light, whose tmin is
+ * eps): lit when A D + eps B > 0, by more than its own rounding. A plane (0, 0, 0, -1) (no triangle in the
+ * cell) decides every lane; (0, 0, 0, inf) (none found) none. The lanes of `walking` only. */
+#define PLANE_ULPS 16.0f
+INLINE lint lit_by_plane(__global const float4 *planes, int first_coarse, lint walking, lint coarse, lfloat sx,
+                         lfloat sy, lfloat sz, float lx, float ly, float lz, float eps)
+{
+    int at[LANES];
+    LANE_STORE(walking ? coarse - first_coarse : (lint)0, at);
+    float px[LANES], py[LANES], pz[LANES], pc[LANES];
+    for (int j = 0; j < LANES; ++j) {
+        const float4 q = planes[at[j]];
+        px[j] = q.x; py[j] = q.y; pz[j] = q.z; pc[j] = q.w;
+    }
+    const lfloat nx = LANE_LOAD(float, px), ny = LANE_LOAD(float, py), nz = LANE_LOAD(float, pz);
+    const lfloat c = LANE_LOAD(float, pc);
+    lfloat dx, dy, dz;
+    to_light(sx, sy, sz, lx, ly, lz, &dx, &dy, &dz);
+    const float u = PLANE_ULPS * 0.5f * FLT_EPSILON;
+    const lfloat fs = nx * sx + ny * sy + nz * sz - c, nd = nx * dx + ny * dy + nz * dz;
+    const lfloat A = fs - u * (SC_LABS(nx * sx) + SC_LABS(ny * sy) + SC_LABS(nz * sz) + SC_LABS(c));
+    const lfloat B = nd - u * (SC_LABS(nx * dx) + SC_LABS(ny * dy) + SC_LABS(nz * dz));
+#if LIGHT_POINT
+    const lfloat D = (SC_LABS(dx) + SC_LABS(dy) + SC_LABS(dz)) * (1.0f + 0x1p-20f);
+#else
+    const lfloat D = (lfloat)1.0f;
+#endif
+    const lfloat AD = A * D, eB = eps * B;
+    return walking & (B >= 0.0f) & (AD + eB > u * (SC_LABS(AD) + eB));
+}
+
+/* The plane of coarse cell `cell` for lit_by_plane, from its triangles' watertight records (their first
+ * line: corners, unit normal, the light's side fL and its bound): the plane of one of them, oriented towards
+ * the light (either winding: a plane has no front of its own here), moved out
+ * past every corner of the cell's triangles by their rounding; none when a corner lies more than eps in
+ * front of it (the plane could then decide no receiver lying on its face), or when the cell's lists hold
+ * more than PLANE_MAX_ENTRIES entries: a ground's cells hold a few, and a cell crowded with a model's
+ * triangles seldom has a plane (bunny: the planes' kernel 5.7 ms with no limit). */
+#define PLANE_MAX_ENTRIES 64
+#define CELL_TRIANGLES(...)                                                                          \
+    for (int k = offsets[cell]; k < offsets[cell + 1]; ++k) {                                        \
+        __global const float *r = records + WT_FLOATS * items[k];                                    \
+        __VA_ARGS__                                                                                  \
+    }                                                                                                \
+    for (int j = j0; j < j1; ++j)                                                                    \
+        for (int i = i0; i < i1; ++i)                                                                \
+            for (int k = offsets[base0 + j * nx + i]; k < offsets[base0 + j * nx + i + 1]; ++k) {    \
+                __global const float *r = records + WT_FLOATS * items[k];                            \
+                __VA_ARGS__                                                                          \
+            }
+NOINLINE float4 cell_plane(int cell, __constant const float *views, __global const int *offsets,
+                           __global const int *items, __global const float *records, float eps)
+{
+    int view = 0;
+    for (int k = 1; k < NVIEWS; ++k)
+        view = (cell >= VIEW_BASE1(views + VIEW_FLOATS * k)) ? k : view;
+    __constant const float *v = views + VIEW_FLOATS * view;
+    const int nx = VIEW_NX(v), ny = VIEW_NY(v), base0 = VIEW_BASE0(v), nx1 = VIEW_NX1(v);
+    const int ci = (cell - VIEW_BASE1(v)) % nx1, cj = (cell - VIEW_BASE1(v)) / nx1;
+    const int i0 = ci << LS_COARSE_SHIFT, i1 = SC_IMIN(i0 + LS_COARSE, nx);
+    const int j0 = cj << LS_COARSE_SHIFT, j1 = SC_IMIN(j0 + LS_COARSE, ny);
+    int entries = offsets[cell + 1] - offsets[cell];
+    for (int j = j0; j < j1; ++j)
+        entries += offsets[base0 + j * nx + i1] - offsets[base0 + j * nx + i0];
+    if (!entries)
+        return (float4)(0.0f, 0.0f, 0.0f, -1.0f);
+    if (entries > PLANE_MAX_ENTRIES)
+        return (float4)(0.0f, 0.0f, 0.0f, INFINITY);
+    /* the centroid of the cell's corners: a plane with every corner behind it has it behind too */
+    float gx = 0.0f, gy = 0.0f, gz = 0.0f;
+    CELL_TRIANGLES({
+        gx += r[0] + r[3] + r[6]; gy += r[1] + r[4] + r[7]; gz += r[2] + r[5] + r[8];
+    })
+    gx /= 3.0f * (float)entries; gy /= 3.0f * (float)entries; gz /= 3.0f * (float)entries;
+    /* the candidate: of the planes that certainly miss the light, turned towards it, those with the centroid
+     * behind (within eps), the one nearest to the centroid: a slab's top face, not its sides or bottom */
+    __global const float *best = 0;
+    float best_side = 0.0f, best_h = -INFINITY;
+    CELL_TRIANGLES({
+        if (SC_ABS(r[12]) > r[13]) {
+            const float side = r[12] > 0.0f ? 1.0f : -1.0f;
+            const float h = side * (r[9] * (gx - r[0]) + r[10] * (gy - r[1]) + r[11] * (gz - r[2]));
+            if (h <= eps && h > best_h) {
+                best = r;
+                best_side = side;
+                best_h = h;
+            }
+        }
+    })
+    if (!best)
+        return (float4)(0.0f, 0.0f, 0.0f, INFINITY);
+    const float bx = best_side * best[9], by = best_side * best[10], bz = best_side * best[11];
+    const float c = bx * best[0] + by * best[1] + bz * best[2];
+    /* the most any corner's exact n.p - c may be: its computed value plus 8 ulps of its terms */
+    const float u = 8.0f * 0.5f * FLT_EPSILON;
+    float most = -INFINITY;
+    CELL_TRIANGLES({
+        for (int q = 0; q < 9; q += 3) {
+            const float f = bx * r[q] + by * r[q + 1] + bz * r[q + 2] - c;
+            const float m = SC_ABS(bx * r[q]) + SC_ABS(by * r[q + 1]) + SC_ABS(bz * r[q + 2]) + SC_ABS(c);
+            most = SC_MAX(most, f + u * m);
+        }
+        if (most > eps)
+            return (float4)(0.0f, 0.0f, 0.0f, INFINITY);
+    })
+    /* c + most rounded up: its rounding and the bound's own stay below 4 ulps of |c| + |most| */
+    return (float4)(bx, by, bz, (c + most) + u * (SC_ABS(c) + SC_ABS(most)));
+}
+#undef CELL_TRIANGLES
+
+/* The planes of coarse cells first_coarse + k, k < ncoarse, for lit_by_plane (CSR lists: offsets, items;
+ * watertight records) */
+__kernel void exact_cell_planes(__constant const float *views, __global const int *offsets, __global const int *items,
+                                __global const float *records, float eps, int first_coarse, int ncoarse,
+                                __global float4 *planes)
+{
+    const int k = get_global_id(0);
+    if (k < ncoarse)
+        planes[k] = cell_plane(first_coarse + k, views, offsets, items, records, eps);
+}
+
 #define BIN_ARGS                                                                                     \
     __global const input_t *points, __global const input_t *normals, int n, MOVE_ARGS,                \
         __constant const float *views, int brute_cell, float lx, float ly, float lz, float eps, int with_normals
@@ -317,12 +446,16 @@ INLINE void load_starts8(__global const Start *start, lfloat *x, lfloat *y, lflo
  * length); views: the grid the lists were built on; start: 32-byte aligned. */
 INLINE void bin_packet(int base, __global const input_t *points, __global const input_t *normals, int n,
                        const Move *m, __constant const float *views, int brute_cell, float lx, float ly, float lz,
-                       float eps, int with_normals, __global uchar *out, __global Start *start, int *cell)
+                       float eps, int with_normals, __global const float4 *planes, int first_coarse,
+                       __global uchar *out, __global Start *start, int *cell)
 {
     lfloat sx, sy, sz;
     const lint codes = receivers_start(base, n, points, normals, m, lx, ly, lz, eps, with_normals, &sx, &sy, &sz);
-    lint coarse, sub;
-    const lint cells = (codes == WALK) ? receiver_cell(views, brute_cell, sx, sy, sz, &coarse, &sub) : (lint)-1;
+    lint coarse = (lint)-1, sub;
+    lint cells = (codes == WALK) ? receiver_cell(views, brute_cell, sx, sy, sz, &coarse, &sub) : (lint)-1;
+    if (first_coarse >= 0)
+        cells = lit_by_plane(planes, first_coarse, (cells >= 0) & (coarse >= 0), coarse, sx, sy, sz, lx, ly, lz, eps)
+                    ? (lint)-1 : cells;
     LANE_STORE(cells, cell);
 #if WHOLE_PACKETS
     if (base + LANES <= n)
@@ -350,41 +483,45 @@ INLINE void bin_packet(int base, __global const input_t *points, __global const 
  *                         interleaved with the starts' stores they cost twice as much (bunny bench: the
  *                         pass 21 -> 15 ms).
  *   exact_bin_count_ends  2 work-items (local size 1), each binning half the packets serially and counting
- *                         them in a row of its own, counts[end (brute_cell + 2) + cell]: no atomics (on a
+ *                         them in a row of its own, counts[end (brute_cell + 1 + LANES) + cell]: no atomics (on a
  *                         2-core CPU the pass 8.6-10.4 -> 5.0-8.2 ms), and no cache line shared between
  *                         the two (counters interleaved, (cell, owner) side by side, went back and forth
  *                         between the cores: 9.3 ms against 9.6 with atomics). exact_bin_fill_ends fills
  *                         the first half's places from the cells' fronts, the second's from their backs,
  *                         so that the offsets stay one per cell (per (cell, owner) offsets made the fill
  *                         5.2 -> 8.5 ms on ogre) and a cell's receivers stay together. counts: 2
- *                         (brute_cell + 2) ints, zeroed; the
- *                         prefix sum adds the rows (lists.h second_row); each row's last entry collects
- *                         the receivers that need no walk (not scanned), so that the loop has no branch. */
-__kernel void exact_bin_count(BIN_ARGS, __global int *counts, __global int *slot, __global uchar *out,
-                              __global Start *start)
+ *                         (brute_cell + 1 + LANES) ints, zeroed; the prefix sum adds the rows (lists.h
+ *                         second_row); each row's last LANES entries collect the receivers that need no
+ *                         walk, one per lane (not scanned), so that the loop has no branch, and no chain
+ *                         of increments of one counter (with most receivers lit by lit_by_plane, one
+ *                         counter for them all cost the pass ~2 ms on the default scene). */
+__kernel void exact_bin_count(BIN_ARGS, __global const float4 *planes, int first_coarse, __global int *counts,
+                              __global int *slot, __global uchar *out, __global Start *start)
 {
     const int base = LANES * get_global_id(0);
     if (base >= n)
         return;
     const Move m = MOVE_OF_ARGS;
     int cell[LANES];
-    bin_packet(base, points, normals, n, &m, views, brute_cell, lx, ly, lz, eps, with_normals, out, start, cell);
+    bin_packet(base, points, normals, n, &m, views, brute_cell, lx, ly, lz, eps, with_normals, planes,
+                   first_coarse, out, start, cell);
     for (int j = 0; j < LANES && base + j < n; ++j)
         slot[base + j] = (cell[j] >= 0) ? atomic_inc(&counts[cell[j]]) : -1;
 }
 
-__kernel void exact_bin_count_ends(BIN_ARGS, int per_end, __global int *counts, __global uchar *out,
-                                   __global Start *start)
+__kernel void exact_bin_count_ends(BIN_ARGS, __global const float4 *planes, int first_coarse, int per_end,
+                                   __global int *counts, __global uchar *out, __global Start *start)
 {
     const int end = get_global_id(0), spare = brute_cell + 1;
     const int last = SC_IMIN(n, (end + 1) * per_end * LANES);
-    __global int *row = counts + end * (brute_cell + 2);
+    __global int *row = counts + end * (brute_cell + 1 + LANES);
     const Move m = MOVE_OF_ARGS;
     for (int base = end * per_end * LANES; base < last; base += LANES) {
         int cell[LANES];
-        bin_packet(base, points, normals, n, &m, views, brute_cell, lx, ly, lz, eps, with_normals, out, start, cell);
+        bin_packet(base, points, normals, n, &m, views, brute_cell, lx, ly, lz, eps, with_normals, planes,
+                   first_coarse, out, start, cell);
         for (int j = 0; j < LANES && base + j < n; ++j)
-            ++row[cell[j] >= 0 ? cell[j] : spare];
+            ++row[cell[j] >= 0 ? cell[j] : spare + j];
     }
 }
 

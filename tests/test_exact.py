@@ -186,7 +186,7 @@ def test_receiver_binning_that_drops_receivers_raises(device, monkeypatch, both_
     one per cell, so that every cell holding several receivers overflows (from either end)."""
     mesh, points, normals = random_scene(7, True)
     real = type(device).kernel
-    counts_at = {"exact_bin_count": 23, "exact_bin_count_ends": 24}    # after the 23 BIN_ARGS (and per_end)
+    counts_at = {"exact_bin_count": 25, "exact_bin_count_ends": 26}    # after the 23 BIN_ARGS, the planes (and per_end)
 
     def cut_counts(self, filename, name, options=()):
         kernel = real(self, filename, name, options)
@@ -604,7 +604,8 @@ def test_the_count_pass_bins_each_receiver_in_the_cell_point_cells_gives(device,
     mesh = soup_mesh(rng, 150, 0.1)
     points = np.concatenate([rng.uniform(-1.5, 1.5, (4000, 3)), rng.uniform(-60, 60, (1003, 3))])
     bounds = np.array([[-1.5, -1.5, -1.5], [1.5, 1.5, 1.5]])
-    mask, method = classify(mesh, LIGHTS[light_name], points, device=device, receiver_bounds=bounds)
+    # every receiver walked (no plane answers one in the count pass), so that nearly all have records
+    mask, method = classify(mesh, LIGHTS[light_name], points, device=device, receiver_bounds=bounds, planes=False)
     records = device.from_device(device.scratch("exact: receiver starts", 16 * len(points)), (len(points), 4), np.float32)
     cells = records[:, 3].view(np.int32)
     walked = cells >= 0
@@ -924,3 +925,81 @@ def test_float32_filter_agrees_with_the_double_refinement(device, tmp_path, rng,
     inside = certain >= 2
     assert np.mean(certain[inside & plain] == 2) > 0.2          # left to the refinement
     assert 0 < refined.sum() < inside.sum()                     # hits on both sides of the ends
+
+
+# Receivers lit by their cell's plane (kernels/exact.cl lit_by_plane) -----------------------------------
+def ground_scene(rng, tilt_degrees=0.0):
+    """Boxes and a triangle soup on a slab (a ground box), the whole turned by tilt_degrees about an oblique
+    axis, with receivers on the slab's top and on everything else: most cells of the slab's top have a
+    plane, and the cells of the objects' shadows have none."""
+    mesh = sc.Mesh.concatenate([box((-2.0, -0.1, -2.0), (2.0, 0.0, 2.0)), box((-0.5, 0.0, -0.3), (0.1, 0.6, 0.2)),
+                                box((0.6, 0.0, 0.5), (0.9, 1.2, 0.8)), soup_mesh(rng, 60, 0.08, 0.6)])
+    mesh = sc.Mesh(mesh.vertices + [0.0, 0.7, 0.0], mesh.faces)
+    xz = rng.uniform(-1.9, 1.9, (8000, 2))
+    top = np.column_stack([xz[:, 0], np.full(len(xz), 0.7), xz[:, 1]])
+    corners = mesh.vertices[mesh.faces[rng.integers(0, len(mesh.faces), 4000)]]     # points on any face
+    a, b = rng.uniform(size=(2, 4000, 1))
+    a, b = np.where(a + b > 1, 1 - a, a), np.where(a + b > 1, 1 - b, b)
+    on_faces = corners[:, 0] + a * (corners[:, 1] - corners[:, 0]) + b * (corners[:, 2] - corners[:, 0])
+    face_normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    points = np.concatenate([top, on_faces])
+    normals = np.concatenate([np.tile([0.0, 1.0, 0.0], (len(top), 1)), face_normals])
+    normals[np.linalg.norm(normals, axis=1) == 0] = [0.0, 1.0, 0.0]
+    if tilt_degrees:
+        axis = np.array([0.3, 0.5, 0.8]) / np.linalg.norm([0.3, 0.5, 0.8])
+        a = np.radians(tilt_degrees)
+        k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+        turn = np.eye(3) + np.sin(a) * k + (1 - np.cos(a)) * k @ k
+        mesh = sc.Mesh(mesh.vertices @ turn.T, mesh.faces)
+        points, normals = points @ turn.T, normals @ turn.T
+    return mesh, points, normals
+
+
+PLANE_LIGHTS = {
+    "point-above": sc.PointLight((0.4, 3.0, 0.3)),
+    "point-inside": sc.PointLight((0.2, 1.1, -0.1)),
+    "directional": sc.DirectionalLight((0.3, -1.0, 0.2)),
+    "grazing": sc.DirectionalLight((1.0, -0.01, 0.1)),
+}
+
+
+@pytest.mark.parametrize("tilt", [0.0, 37.0])
+@pytest.mark.parametrize("with_normals", [False, True], ids=["points", "normals"])
+@pytest.mark.parametrize("light_name", list(PLANE_LIGHTS))
+def test_receivers_lit_by_their_cells_plane_change_no_answer(device, rng, light_name, with_normals, tilt):
+    """With the planes, most receivers on the slab are answered in the first pass, never walked; the mask is
+    the one every receiver's walk gives, and the reference's away from float32's band."""
+    mesh, points, normals = ground_scene(rng, tilt)
+    normals = normals if with_normals else None
+    light = PLANE_LIGHTS[light_name]
+    # a grid as fine as a one-shot call's for ~1 M receivers (coarse cells of 1/32 of a view's side)
+    mask, method = classify(mesh, light, points, normals, device=device, resolution=256)
+    walked_all, everyone = classify(mesh, light, points, normals, device=device, resolution=256, planes=False)
+    assert np.array_equal(mask, walked_all)
+    facing = everyone.stats["walked"]
+    if light_name != "grazing":
+        assert method.stats["walked"] < 0.8 * facing, "the planes decided too few receivers: the test tests nothing"
+    check_against_reference(mask, mesh, light, points, normals, default_eps(mesh.bounds), f"planes/{light_name}")
+
+
+@pytest.mark.parametrize("height", [0.0, 1e-7, 1e-6, 1e-5, 1e-4])
+def test_a_sheet_hovering_over_the_ground_is_not_hidden_by_its_plane(device, rng, height):
+    """A sheet lying `height` (of the scene's size) above a ground plane, in the same cells: its corners are
+    in front of the ground's plane by less than eps, so the cell's plane moves out past them, and the
+    receivers on the ground under the sheet (with and without normals; eps far below and above the
+    height) stay in shadow, as with every receiver walked."""
+    ground = box((-1.0, -0.1, -1.0), (1.0, 0.0, 1.0))
+    sheet = grid_plane(2, 0.4, y=height * 2.0)           # the scene's size is ~2
+    mesh = sc.Mesh.concatenate([ground, sheet])
+    xz = rng.uniform(-0.9, 0.9, (6000, 2))
+    points = np.column_stack([xz[:, 0], np.zeros(len(xz)), xz[:, 1]])
+    normals = np.tile([0.0, 1.0, 0.0], (len(points), 1))
+    light = sc.PointLight((0.05, 2.0, 0.03))
+    for eps in (1e-8, 1e-6, default_eps(mesh.bounds)):
+        for n in (normals, None):
+            mask, method = classify(mesh, light, points, n, eps=eps, device=device, resolution=256)
+            walked_all, _ = classify(mesh, light, points, n, eps=eps, device=device, resolution=256, planes=False)
+            assert np.array_equal(mask, walked_all), f"eps {eps}, normals {n is not None}"
+            # a sheet within float32's band of the ground leaves every receiver undecided: only the
+            # receivers away from it must be the reference's
+            check_against_reference(mask, mesh, light, points, n, eps, f"sheet {height}/eps {eps}", max_undecided=1.0)

@@ -247,6 +247,10 @@ class ExactMethod(Method):
                         "certificate is made once per mesh, in NumPy (0.01-0.8 s on the "
                         "bench scenes: several one-shot calls), so it pays over many lights: shadow_counts and "
                         "shadow_matrix turn it on from CULL_FROM_LIGHTS lights unless told"),
+        "planes": (True, "csr lists, watertight test: give each coarse cell a plane with all the triangles its "
+                         "receivers walk behind it, and answer a receiver whose segment stays in front of it lit "
+                         "in the binning's first pass, without binning or walking it (kernels/exact.cl "
+                         "lit_by_plane); the same answers. Off: every receiver is walked"),
     }
 
     def __init__(self, device, **params):
@@ -261,6 +265,7 @@ class ExactMethod(Method):
         self.order = choice("order", p["order"], ORDERS)
         self.split = flag("split", p["split"])
         self.cull = flag("cull", p["cull"])
+        self.planes = flag("planes", p["planes"])
         self._builder = lightspace.ListBuilder(device, corners=3)
         # float64 points go to the device as they are when it has doubles (cheaper than converting here)
         self._fp64 = "cl_khr_fp64" in device.cl_device.extensions
@@ -331,12 +336,14 @@ class ExactMethod(Method):
         if self.split and self.lists_kind == "csr" and \
                 lists.coarse_entries > SPLIT_PER_COARSE_CELL * (grid.cells - grid.fine_cells):
             lists, split = self._split_lists(grid, lists, vertices, faces[:ntris])
+        planes = self._cell_planes(grid, lists, records, eps, options)
         dev.queue.finish()
         t3 = time.perf_counter()
 
         self.mesh, self.light, self.eps, self.origin = mesh, light, float(eps), origin
         self.grid, self.lists, self._tris_dev, self._records = grid, lists, tris_dev, records
         self._light_vec = light_vec
+        self._planes = planes
         self._ntris = ntris
         self._program = options
         self._prepared = True
@@ -350,6 +357,20 @@ class ExactMethod(Method):
             mean_list=(lists.entries - max(lists.coarse_entries, 0)) / grid.fine_cells,
             upload_s=t1 - t0, views_s=t2 - t1, lists_s=t3 - t2, prepare_s=t3 - t0,
         )
+
+    def _cell_planes(self, grid, lists, records: cl.Buffer, eps: float, options) -> cl.Buffer | None:
+        """Each coarse cell's plane for the first pass's lit receivers (kernels/exact.cl exact_cell_planes), or
+        None when off: with linked lists (no list per cell to read as a range) and with dot5 (the paper's
+        test, whose leaks and false hits through shared edges are its own answers to compare)."""
+        if not (self.planes and self.lists_kind == "csr" and self.test == "watertight"):
+            return None
+        ncoarse = grid.cells - grid.fine_cells
+        planes = self.device.empty(16 * ncoarse, "exact: the coarse cells' planes")
+        offsets, items = lists.buffers()
+        self.device.kernel("exact.cl", "exact_cell_planes", options)(
+            self.device.queue, (ncoarse,), None, lists.params, offsets, items, records, np.float32(eps),
+            np.int32(grid.fine_cells), np.int32(ncoarse), planes)
+        return planes
 
     def _faces_to_list(self, mesh: Mesh, light, receiver_bounds) -> tuple[np.ndarray, int]:
         """``mesh.faces`` reordered so that those to list for ``light`` come first, and how many they are:
@@ -493,11 +514,13 @@ class ExactMethod(Method):
         near = np.array([[-np.inf] * 3, [np.inf] * 3]) if near_box is None else near_box - self.origin
         n = len(points)
         out = np.empty(n, dtype=np.uint8)
-        brute = 0
+        brute = walked = 0
         for lo in range(0, n, self.chunk):
             hi = min(n, lo + self.chunk)
-            out[lo:hi], behind = self._run(points[lo:hi], None if normals is None else normals[lo:hi], move, near)
+            out[lo:hi], behind, binned = self._run(points[lo:hi], None if normals is None else normals[lo:hi], move,
+                                                   near)
             brute += behind
+            walked += binned
         far = np.zeros(0, dtype=np.int64)
         if n and out.max() > 1:     # one pass over the codes; the search only when one is bad
             bad = np.flatnonzero((out == 3) | (out == 4))
@@ -510,19 +533,20 @@ class ExactMethod(Method):
                 raise RuntimeError("exact: the device refused normals the host check accepts (a bug)")
             far = np.flatnonzero(out == FAR)
             out[far] = 0
-        self.stats.update(classify_s=time.perf_counter() - t0, receivers=n, brute_fallback=brute)
+        self.stats.update(classify_s=time.perf_counter() - t0, receivers=n, brute_fallback=brute, walked=walked)
         return out.view(bool), far
 
     def _run(self, points: np.ndarray, normals: np.ndarray | None, move: tuple,
-             near: np.ndarray) -> tuple[np.ndarray, int]:
-        """Codes (0 lit, 1 shadow, 3 bad point, 4 bad normal, FAR beyond ``near``) of one chunk, and how
-        many of its points were tested against every triangle (behind a single perspective view).
+             near: np.ndarray) -> tuple[np.ndarray, int, int]:
+        """Codes (0 lit, 1 shadow, 3 bad point, 4 bad normal, FAR beyond ``near``) of one chunk, how many of
+        its points were tested against every triangle (behind a single perspective view), and how many
+        were walked (the rest answered in the first pass: facing away, lit by their cell's plane, or bad).
         ``move``: (cx, cy, cz, 1 / scale) of the frame the points are still to be moved into (float64
         input only); ``near``: (2, 3) box relative to the origin."""
         dev, queue = self.device, self.device.queue
         n = len(points)
         if n == 0:
-            return np.empty(0, np.uint8), 0
+            return np.empty(0, np.uint8), 0, 0
         if self._fp64:
             # float64 in; the kernel moves the points, subtracts the origin in double and rounds, as the
             # host would
@@ -539,6 +563,9 @@ class ExactMethod(Method):
         light = [np.float32(c) for c in self._light_vec]
         bin_args = (points_dev, normals_dev, np.int32(n), *origin, self.lists.params, np.int32(brute_cell),
                     *light, np.float32(self.eps), np.int32(normals is not None))
+        # the first pass's lit receivers (None: every receiver walks; the buffer then is never read)
+        planes = (self._planes, np.int32(self.grid.fine_cells)) if self._planes is not None else \
+            (self.lists.params, np.int32(-1))
         walk_coarse = np.int32(self.lists.coarse_entries != 0)
         lists_a, lists_b = self.lists.buffers()
         out_dev = dev.scratch("exact: classify output", n)
@@ -548,9 +575,9 @@ class ExactMethod(Method):
             dev.kernel("exact.cl", "exact_classify_points", options)(
                 queue, (n,), None, *bin_args, self._records, np.int32(self._ntris), lists_a, lists_b,
                 self.lists.fine_masks, walk_coarse, behind, out_dev)
-            return dev.from_device(out_dev, n, np.uint8), int(dev.from_device(behind, 1, np.int32)[0])
+            return dev.from_device(out_dev, n, np.uint8), int(dev.from_device(behind, 1, np.int32)[0]), n
         rows = 2 if self._both_ends else 1
-        row = brute_cell + 2                          # a row of counts: every cell, then the non-walkers
+        row = brute_cell + 1 + BIN_LANES              # a row of counts: every cell, then the non-walkers by lane
         counts = dev.scratch("exact: receiver cell counts", 4 * row * rows)
         cl.enqueue_fill_buffer(queue, counts, np.int32(0), 0, 4 * row * rows)
         start = dev.scratch("exact: receiver starts", 16 * n)          # (s, cell) per receiver: kernels/exact.cl Start
@@ -558,10 +585,10 @@ class ExactMethod(Method):
         per_end = np.int32(-(-packets // 2))
         if self._both_ends:
             dev.kernel("exact.cl", "exact_bin_count_ends", options)(
-                queue, (2,), (1,), *bin_args, per_end, counts, out_dev, start)
+                queue, (2,), (1,), *bin_args, *planes, per_end, counts, out_dev, start)
         else:
             slot = dev.scratch("exact: receiver slots", 4 * n)
-            dev.kernel("exact.cl", "exact_bin_count", options)(queue, (packets,), None, *bin_args, counts, slot,
+            dev.kernel("exact.cl", "exact_bin_count", options)(queue, (packets,), None, *bin_args, *planes, counts, slot,
                                                                out_dev, start)
         offsets = dev.scratch("exact: receiver cell offsets", 4 * (brute_cell + 2))
         # The host waits for the total and for the fill's check: a kernel enqueued behind running ones ran
@@ -585,7 +612,7 @@ class ExactMethod(Method):
                 self.lists.fine_masks, *light, np.float32(self.eps), walk_coarse, np.int32(n), out_dev)
         brute = np.empty(2, np.int32)                    # the brute cell's bounds
         cl.enqueue_copy(queue, brute, offsets, src_offset=4 * brute_cell)
-        return dev.from_device(out_dev, n, np.uint8), int(brute[1] - brute[0])
+        return dev.from_device(out_dev, n, np.uint8), int(brute[1] - brute[0]), binned_count
 
     # statistics ----------------------------------------------------------------------------------------
     def _list_lengths(self) -> np.ndarray:
