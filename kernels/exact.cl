@@ -306,52 +306,130 @@ INLINE void load_starts8(__global const Start *start, lfloat *x, lfloat *y, lflo
 }
 #endif
 
-/* Lit without a walk. Each coarse cell may have a plane (exact_cell_planes) with every triangle that a
- * receiver of the cell can walk (the coarse cell's list and its fine cells' lists) on or behind it, in
- * exact arithmetic on the triangles' float32 corners: a lane whose tested part of the segment stays
- * strictly in front of it meets none of them, and is lit. Most receivers on a ground plane, or on a
- * solid's face turned towards the light, are decided so in the count pass and never binned, filled or
- * walked. Along the segment f(x) = n.x - c is f(s + t d) = f(s) + t n.d; with lower bounds A <= f(s) and
- * 0 <= B <= n.d (their float32 sums of 4 products, FP_CONTRACT off, are off by at most 4 ulps of the
- * terms' magnitudes; PLANE_ULPS allowed), f is at least A + t B from the walk's tmin on, and tmin >=
- * eps / D for D = |d|_1 rounded up (>= |d|, so no square root; 1 for a directional light, whose tmin is
- * eps): lit when A D + eps B > 0, by more than its own rounding. A plane (0, 0, 0, -1) (no triangle in the
- * cell) decides every lane; (0, 0, 0, inf) (none found) none. The lanes of `walking` only. */
+/* Receivers decided without a walk. Each coarse cell may have a plane (exact_cell_planes), n.x = c_hi,
+ * with every triangle that a receiver of the cell can walk (the coarse cell's list and its fine cells'
+ * lists) on or behind it, in exact arithmetic on the triangles' float32 corners: a lane whose tested part
+ * of the segment stays strictly in front of it meets none of them, and is lit. The plane is a triangle T's,
+ * and when T covers the whole cell as the light sees it (every line from the light through the cell, the
+ * cell enlarged by PLANE_CELL_MARGIN, passes through T by more than the cone test's bound), a lane whose
+ * tested part starts behind T (n.x < c_lo: T's corners lie in c_lo <= n.x <= c_top) and ends in front of it
+ * (n.x > c_top) crosses T, and is in shadow. Most receivers on a ground plane, or on a solid's faces, are
+ * decided so in the count pass and never binned, filled or walked.
+ * Along the segment n.(s + t d) = n.s + t n.d. The float32 sums n.s and n.d (4 products, FP_CONTRACT off)
+ * are off by at most 4 ulps of their terms' magnitudes ms, md; PLANE_ULPS allowed. The walk's tmin =
+ * eps / |d| (eps for a directional light) lies in [eps / D, eps / M] for D = |d|_1 and M = max |d_i|,
+ * each rounded outwards: lit when n.s - c_hi + (eps / D) n.d > 0 (n.d >= 0) by more than the rounding
+ * (multiplied by D: no division), in shadow when n.s + (eps / M) n.d < c_lo and n.(s + d) > c_top (a point
+ * light; a directional light's ray goes on) by more than it, with |d|_1 within the cell's reach (point
+ * light: 16 times T's distance from the light, so that the computed segment's direction, off by ~1e-7,
+ * stays in the enlarged cell where it meets T). A cell with no triangle is (0, 0, 0, -1, -inf): every lane
+ * lit; no plane is c_hi = inf; no cover c_lo = -inf. Lanes outside `walking` are neither. */
 #define PLANE_ULPS 16.0f
-INLINE lint lit_by_plane(__global const float4 *planes, int first_coarse, lint walking, lint coarse, lfloat sx,
-                         lfloat sy, lfloat sz, float lx, float ly, float lz, float eps)
+INLINE lint decided_by_plane(__global const float8 *planes, int first_coarse, lint walking, lint coarse, lfloat sx,
+                             lfloat sy, lfloat sz, float lx, float ly, float lz, float eps, lint *shadow)
 {
     int at[LANES];
     LANE_STORE(walking ? coarse - first_coarse : (lint)0, at);
-    float px[LANES], py[LANES], pz[LANES], pc[LANES];
+    float px[LANES], py[LANES], pz[LANES], phi[LANES], plo[LANES], ptop[LANES], preach[LANES];
     for (int j = 0; j < LANES; ++j) {
-        const float4 q = planes[at[j]];
-        px[j] = q.x; py[j] = q.y; pz[j] = q.z; pc[j] = q.w;
+        const float8 q = planes[at[j]];
+        px[j] = q.s0; py[j] = q.s1; pz[j] = q.s2; phi[j] = q.s3; plo[j] = q.s4; ptop[j] = q.s5; preach[j] = q.s6;
     }
     const lfloat nx = LANE_LOAD(float, px), ny = LANE_LOAD(float, py), nz = LANE_LOAD(float, pz);
-    const lfloat c = LANE_LOAD(float, pc);
+    const lfloat c_hi = LANE_LOAD(float, phi), c_lo = LANE_LOAD(float, plo), c_top = LANE_LOAD(float, ptop);
     lfloat dx, dy, dz;
     to_light(sx, sy, sz, lx, ly, lz, &dx, &dy, &dz);
     const float u = PLANE_ULPS * 0.5f * FLT_EPSILON;
-    const lfloat fs = nx * sx + ny * sy + nz * sz - c, nd = nx * dx + ny * dy + nz * dz;
-    const lfloat A = fs - u * (SC_LABS(nx * sx) + SC_LABS(ny * sy) + SC_LABS(nz * sz) + SC_LABS(c));
-    const lfloat B = nd - u * (SC_LABS(nx * dx) + SC_LABS(ny * dy) + SC_LABS(nz * dz));
+    const lfloat ns = nx * sx + ny * sy + nz * sz, nd = nx * dx + ny * dy + nz * dz;
+    const lfloat ms = SC_LABS(nx * sx) + SC_LABS(ny * sy) + SC_LABS(nz * sz);
+    const lfloat md = SC_LABS(nx * dx) + SC_LABS(ny * dy) + SC_LABS(nz * dz);
+    const lfloat B = nd - u * md;                          /* <= n.d */
+    const lfloat A = (ns - c_hi) - u * (ms + SC_LABS(c_hi));
 #if LIGHT_POINT
-    const lfloat D = (SC_LABS(dx) + SC_LABS(dy) + SC_LABS(dz)) * (1.0f + 0x1p-20f);
+    const lfloat ax = SC_LABS(dx), ay = SC_LABS(dy), az = SC_LABS(dz);
+    const lfloat M = (ax > ay) ? ((ax > az) ? ax : az) : ((ay > az) ? ay : az);
+    const lfloat d1 = ax + ay + az;
+    const lfloat D = d1 * (1.0f + 0x1p-20f);
+    const lfloat t_hi = (eps * (1.0f + 0x1p-20f)) / M;
+    const lfloat end = (ns - u * ms) + B;                  /* <= n.(s + d) */
+    const lint ends_in_front = (end > c_top + u * (SC_LABS(c_top) + ms + md)) & (d1 <= LANE_LOAD(float, preach));
 #else
     const lfloat D = (lfloat)1.0f;
+    const lfloat t_hi = (lfloat)eps;
+    const lint ends_in_front = (lint)-1;
 #endif
     const lfloat AD = A * D, eB = eps * B;
+    const lfloat starts = (ns + u * ms) + t_hi * (nd + u * md);     /* >= n.(s + tmin d) */
+    *shadow = walking & (B > 0.0f) & ends_in_front & (starts < c_lo - u * (SC_LABS(c_lo) + ms + t_hi * md));
     return walking & (B >= 0.0f) & (AD + eB > u * (SC_LABS(AD) + eB));
 }
 
-/* The plane of coarse cell `cell` for lit_by_plane, from its triangles' watertight records (their first
- * line: corners, unit normal, the light's side fL and its bound): the plane of one of them, oriented towards
- * the light (either winding: a plane has no front of its own here), moved out
- * past every corner of the cell's triangles by their rounding; none when a corner lies more than eps in
- * front of it (the plane could then decide no receiver lying on its face), or when the cell's lists hold
- * more than PLANE_MAX_ENTRIES entries: a ground's cells hold a few, and a cell crowded with a model's
- * triangles seldom has a plane (bunny: the planes' kernel 5.7 ms with no limit). */
+/* Does T (a watertight record) cover the coarse cell of fine cells [i0, i1) x [j0, j1) of view v (a border
+ * cell to the view's domain), enlarged by PLANE_CELL_MARGIN fine cells: are the enlarged cell's four corner lines (from the light, or along a
+ * directional light's travel) inside T's three edge planes by more than the cone test's bound? The corners
+ * solved from the view's rows in float32 (off by ~1e-6 of a cell's coordinates, far inside the margin);
+ * the margin also covers the receivers' cells' rounding and the computed segments' direction. Cube faces
+ * and orthographic views; a single perspective view's (its rows carry the far eye) is not covered. */
+#define PLANE_CELL_MARGIN 0.125f
+INLINE int covers_cell(__global const float *r, __constant const float *v, int i0, int i1, int j0, int j1,
+                       float lx, float ly, float lz)
+{
+#if PERSPECTIVE && NVIEWS == 1
+    return 0;
+#else
+    /* rows a, b, c of the system (the cube: M d = (x, y, 1) w; orthographic: [Mx; My; travel] p = (x - cx,
+     * y - cy, 0)), solved by Cramer's rule */
+    const float a0 = v[4], a1 = v[5], a2 = v[6], b0 = v[8], b1 = v[9], b2 = v[10];
+#if PERSPECTIVE
+    const float c0 = v[12], c1 = v[13], c2 = v[14];
+#else
+    const float c0 = lx, c1 = ly, c2 = lz;
+#endif
+    const float k00 = b1 * c2 - b2 * c1, k01 = a2 * c1 - a1 * c2, k02 = a1 * b2 - a2 * b1;
+    const float k10 = b2 * c0 - b0 * c2, k11 = a0 * c2 - a2 * c0, k12 = a2 * b0 - a0 * b2;
+    const float k20 = b0 * c1 - b1 * c0, k21 = a1 * c0 - a0 * c1, k22 = a0 * b1 - a1 * b0;
+    const float det = a0 * k00 + a1 * k10 + a2 * k20;
+    if (!(SC_ABS(det) > 0.0f))
+        return 0;
+    /* a border cell reaches the view's domain (lightspace.h): a cube face's edge; an unbounded one is not
+     * covered */
+    const float x0 = (i0 == 0) ? v[20] : (float)i0, x1 = (i1 == VIEW_NX(v)) ? v[21] : (float)i1;
+    const float y0 = (j0 == 0) ? v[22] : (float)j0, y1 = (j1 == VIEW_NY(v)) ? v[23] : (float)j1;
+    if (!(SC_MAX(SC_MAX(SC_ABS(x0), SC_ABS(x1)), SC_MAX(SC_ABS(y0), SC_ABS(y1))) < 0.5f * SC_BIG))
+        return 0;
+    for (int corner = 0; corner < 4; ++corner) {
+        const float x = (corner & 1) ? x1 + PLANE_CELL_MARGIN : x0 - PLANE_CELL_MARGIN;
+        const float y = (corner & 2) ? y1 + PLANE_CELL_MARGIN : y0 - PLANE_CELL_MARGIN;
+#if PERSPECTIVE
+        const float e0 = x, e1 = y, e2 = 1.0f;
+        const float sign = -1.0f;        /* the cone test's x is light - point: minus the direction */
+#else
+        const float e0 = x - v[7], e1 = y - v[11], e2 = 0.0f;
+        const float sign = 1.0f;         /* the cone test's x is the point */
+#endif
+        const float inv = sign / det;
+        const float px = (k00 * e0 + k01 * e1 + k02 * e2) * inv;
+        const float py = (k10 * e0 + k11 * e1 + k12 * e2) * inv;
+        const float pz = (k20 * e0 + k21 * e1 + k22 * e2) * inv;
+        const float bound = r[25] * (SC_ABS(px) + SC_ABS(py) + SC_ABS(pz)) + r[26];
+        for (int e = 0; e < 3; ++e)
+            if (!(r[16 + 3 * e] * px + r[17 + 3 * e] * py + r[18 + 3 * e] * pz - r[27 + e] > bound))
+                return 0;
+    }
+    return 1;
+#endif
+}
+
+/* The planes of coarse cell `cell` for decided_by_plane, from its triangles' watertight records (corners,
+ * unit normal, the light's side fL and its bound; the edge planes): T is one of them, its plane oriented
+ * towards the light (either winding: a plane has no front of its own here): of those whose plane certainly
+ * misses the light and has the centroid of the cell's corners behind it (within eps), the one nearest to
+ * the centroid (a slab's top face, not its sides or bottom). c_hi is T's plane moved out past every corner
+ * of the cell's triangles by their rounding; none when a corner lies more than eps in front of it (the
+ * plane could then decide no receiver lying on its face), or when the cell's lists hold more than
+ * PLANE_MAX_ENTRIES entries: a ground's cells hold a few, and a cell crowded with a model's triangles
+ * seldom has a plane (bunny: the planes' kernel 5.7 ms with no limit). Written to planes[0] (float8: n,
+ * c_hi, c_lo, c_top, reach, 0). */
 #define PLANE_MAX_ENTRIES 64
 #define CELL_TRIANGLES(...)                                                                          \
     for (int k = offsets[cell]; k < offsets[cell + 1]; ++k) {                                        \
@@ -364,9 +442,11 @@ INLINE lint lit_by_plane(__global const float4 *planes, int first_coarse, lint w
                 __global const float *r = records + WT_FLOATS * items[k];                            \
                 __VA_ARGS__                                                                          \
             }
-NOINLINE float4 cell_plane(int cell, __constant const float *views, __global const int *offsets,
-                           __global const int *items, __global const float *records, float eps)
+NOINLINE float8 cell_plane(int cell, __constant const float *views, __global const int *offsets,
+                           __global const int *items, __global const float *records, float lx, float ly, float lz,
+                           float eps)
 {
+    const float8 none = (float8)(0.0f, 0.0f, 0.0f, INFINITY, -INFINITY, INFINITY, 0.0f, 0.0f);
     int view = 0;
     for (int k = 1; k < NVIEWS; ++k)
         view = (cell >= VIEW_BASE1(views + VIEW_FLOATS * k)) ? k : view;
@@ -379,17 +459,15 @@ NOINLINE float4 cell_plane(int cell, __constant const float *views, __global con
     for (int j = j0; j < j1; ++j)
         entries += offsets[base0 + j * nx + i1] - offsets[base0 + j * nx + i0];
     if (!entries)
-        return (float4)(0.0f, 0.0f, 0.0f, -1.0f);
+        return (float8)(0.0f, 0.0f, 0.0f, -1.0f, -INFINITY, INFINITY, 0.0f, 0.0f);
     if (entries > PLANE_MAX_ENTRIES)
-        return (float4)(0.0f, 0.0f, 0.0f, INFINITY);
+        return none;
     /* the centroid of the cell's corners: a plane with every corner behind it has it behind too */
     float gx = 0.0f, gy = 0.0f, gz = 0.0f;
     CELL_TRIANGLES({
         gx += r[0] + r[3] + r[6]; gy += r[1] + r[4] + r[7]; gz += r[2] + r[5] + r[8];
     })
     gx /= 3.0f * (float)entries; gy /= 3.0f * (float)entries; gz /= 3.0f * (float)entries;
-    /* the candidate: of the planes that certainly miss the light, turned towards it, those with the centroid
-     * behind (within eps), the one nearest to the centroid: a slab's top face, not its sides or bottom */
     __global const float *best = 0;
     float best_side = 0.0f, best_h = -INFINITY;
     CELL_TRIANGLES({
@@ -404,35 +482,56 @@ NOINLINE float4 cell_plane(int cell, __constant const float *views, __global con
         }
     })
     if (!best)
-        return (float4)(0.0f, 0.0f, 0.0f, INFINITY);
+        return none;
     const float bx = best_side * best[9], by = best_side * best[10], bz = best_side * best[11];
     const float c = bx * best[0] + by * best[1] + bz * best[2];
-    /* the most any corner's exact n.p - c may be: its computed value plus 8 ulps of its terms */
+    /* the most (the least) an exact n.p - c may be over corners p: computed value plus (minus) 8 ulps of
+     * its terms */
     const float u = 8.0f * 0.5f * FLT_EPSILON;
+#define CORNER_SPREAD(p, f, m)                                                                       \
+    const float f = bx * (p)[0] + by * (p)[1] + bz * (p)[2] - c;                                   \
+    const float m = SC_ABS(bx * (p)[0]) + SC_ABS(by * (p)[1]) + SC_ABS(bz * (p)[2]) + SC_ABS(c);
+    float own = 0.0f;                                      /* T's own corners' spread about c */
+    for (int q = 0; q < 9; q += 3) {
+        CORNER_SPREAD(best + q, f, m)
+        own = SC_MAX(own, SC_ABS(f) + u * m);
+    }
+    float8 out = none;
+    if (covers_cell(best, v, i0, i1, j0, j1, lx, ly, lz)) {
+        out.s4 = (c - own) - u * (SC_ABS(c) + own);
+        out.s5 = (c + own) + u * (SC_ABS(c) + own);
+#if LIGHT_POINT
+        out.s6 = 16.0f * (SC_ABS(best[12]) - best[13]);    /* |d|_1 beyond it: no shadow decided */
+#else
+        out.s6 = INFINITY;
+#endif
+    }
+    out.s0 = bx; out.s1 = by; out.s2 = bz;
     float most = -INFINITY;
     CELL_TRIANGLES({
         for (int q = 0; q < 9; q += 3) {
-            const float f = bx * r[q] + by * r[q + 1] + bz * r[q + 2] - c;
-            const float m = SC_ABS(bx * r[q]) + SC_ABS(by * r[q + 1]) + SC_ABS(bz * r[q + 2]) + SC_ABS(c);
+            CORNER_SPREAD(r + q, f, m)
             most = SC_MAX(most, f + u * m);
         }
         if (most > eps)
-            return (float4)(0.0f, 0.0f, 0.0f, INFINITY);
+            return out;
     })
+#undef CORNER_SPREAD
     /* c + most rounded up: its rounding and the bound's own stay below 4 ulps of |c| + |most| */
-    return (float4)(bx, by, bz, (c + most) + u * (SC_ABS(c) + SC_ABS(most)));
+    out.s3 = (c + most) + u * (SC_ABS(c) + SC_ABS(most));
+    return out;
 }
 #undef CELL_TRIANGLES
 
-/* The planes of coarse cells first_coarse + k, k < ncoarse, for lit_by_plane (CSR lists: offsets, items;
- * watertight records) */
+/* The planes of coarse cells first_coarse + k, k < ncoarse, for decided_by_plane (CSR lists: offsets,
+ * items; watertight records; the light as the walk's) */
 __kernel void exact_cell_planes(__constant const float *views, __global const int *offsets, __global const int *items,
-                                __global const float *records, float eps, int first_coarse, int ncoarse,
-                                __global float4 *planes)
+                                __global const float *records, float lx, float ly, float lz, float eps,
+                                int first_coarse, int ncoarse, __global float8 *planes)
 {
     const int k = get_global_id(0);
     if (k < ncoarse)
-        planes[k] = cell_plane(first_coarse + k, views, offsets, items, records, eps);
+        planes[k] = cell_plane(first_coarse + k, views, offsets, items, records, lx, ly, lz, eps);
 }
 
 #define BIN_ARGS                                                                                     \
@@ -446,16 +545,20 @@ __kernel void exact_cell_planes(__constant const float *views, __global const in
  * length); views: the grid the lists were built on; start: 32-byte aligned. */
 INLINE void bin_packet(int base, __global const input_t *points, __global const input_t *normals, int n,
                        const Move *m, __constant const float *views, int brute_cell, float lx, float ly, float lz,
-                       float eps, int with_normals, __global const float4 *planes, int first_coarse,
+                       float eps, int with_normals, __global const float8 *planes, int first_coarse,
                        __global uchar *out, __global Start *start, int *cell)
 {
     lfloat sx, sy, sz;
-    const lint codes = receivers_start(base, n, points, normals, m, lx, ly, lz, eps, with_normals, &sx, &sy, &sz);
+    lint codes = receivers_start(base, n, points, normals, m, lx, ly, lz, eps, with_normals, &sx, &sy, &sz);
     lint coarse = (lint)-1, sub;
     lint cells = (codes == WALK) ? receiver_cell(views, brute_cell, sx, sy, sz, &coarse, &sub) : (lint)-1;
-    if (first_coarse >= 0)
-        cells = lit_by_plane(planes, first_coarse, (cells >= 0) & (coarse >= 0), coarse, sx, sy, sz, lx, ly, lz, eps)
-                    ? (lint)-1 : cells;
+    if (first_coarse >= 0) {
+        lint shadow;
+        const lint lit = decided_by_plane(planes, first_coarse, (cells >= 0) & (coarse >= 0), coarse, sx, sy, sz, lx,
+                                          ly, lz, eps, &shadow);
+        codes = shadow ? (lint)1 : codes;
+        cells = (lit | shadow) ? (lint)-1 : cells;
+    }
     LANE_STORE(cells, cell);
 #if WHOLE_PACKETS
     if (base + LANES <= n)
@@ -493,9 +596,9 @@ INLINE void bin_packet(int base, __global const input_t *points, __global const 
  *                         (brute_cell + 1 + LANES) ints, zeroed; the prefix sum adds the rows (lists.h
  *                         second_row); each row's last LANES entries collect the receivers that need no
  *                         walk, one per lane (not scanned), so that the loop has no branch, and no chain
- *                         of increments of one counter (with most receivers lit by lit_by_plane, one
+ *                         of increments of one counter (with most receivers decided by decided_by_plane, one
  *                         counter for them all cost the pass ~2 ms on the default scene). */
-__kernel void exact_bin_count(BIN_ARGS, __global const float4 *planes, int first_coarse, __global int *counts,
+__kernel void exact_bin_count(BIN_ARGS, __global const float8 *planes, int first_coarse, __global int *counts,
                               __global int *slot, __global uchar *out, __global Start *start)
 {
     const int base = LANES * get_global_id(0);
@@ -509,7 +612,7 @@ __kernel void exact_bin_count(BIN_ARGS, __global const float4 *planes, int first
         slot[base + j] = (cell[j] >= 0) ? atomic_inc(&counts[cell[j]]) : -1;
 }
 
-__kernel void exact_bin_count_ends(BIN_ARGS, __global const float4 *planes, int first_coarse, int per_end,
+__kernel void exact_bin_count_ends(BIN_ARGS, __global const float8 *planes, int first_coarse, int per_end,
                                    __global int *counts, __global uchar *out, __global Start *start)
 {
     const int end = get_global_id(0), spare = brute_cell + 1;

@@ -248,9 +248,10 @@ class ExactMethod(Method):
                         "bench scenes: several one-shot calls), so it pays over many lights: shadow_counts and "
                         "shadow_matrix turn it on from CULL_FROM_LIGHTS lights unless told"),
         "planes": (True, "csr lists, watertight test: give each coarse cell a plane with all the triangles its "
-                         "receivers walk behind it, and answer a receiver whose segment stays in front of it lit "
-                         "in the binning's first pass, without binning or walking it (kernels/exact.cl "
-                         "lit_by_plane); the same answers. Off: every receiver is walked"),
+                         "receivers walk behind it (a triangle's: lit in front of it; in shadow behind it when "
+                         "the triangle covers the cell) and answer such receivers in the binning's first pass, "
+                         "without binning or walking them (kernels/exact.cl decided_by_plane); the same "
+                         "answers. Off: every receiver is walked"),
     }
 
     def __init__(self, device, **params):
@@ -336,7 +337,7 @@ class ExactMethod(Method):
         if self.split and self.lists_kind == "csr" and \
                 lists.coarse_entries > SPLIT_PER_COARSE_CELL * (grid.cells - grid.fine_cells):
             lists, split = self._split_lists(grid, lists, vertices, faces[:ntris])
-        planes = self._cell_planes(grid, lists, records, eps, options)
+        planes = self._cell_planes(grid, lists, records, light_vec, eps, options)
         dev.queue.finish()
         t3 = time.perf_counter()
 
@@ -358,18 +359,19 @@ class ExactMethod(Method):
             upload_s=t1 - t0, views_s=t2 - t1, lists_s=t3 - t2, prepare_s=t3 - t0,
         )
 
-    def _cell_planes(self, grid, lists, records: cl.Buffer, eps: float, options) -> cl.Buffer | None:
+    def _cell_planes(self, grid, lists, records: cl.Buffer, light_vec: np.ndarray, eps: float,
+                     options) -> cl.Buffer | None:
         """Each coarse cell's plane for the first pass's lit receivers (kernels/exact.cl exact_cell_planes), or
         None when off: with linked lists (no list per cell to read as a range) and with dot5 (the paper's
         test, whose leaks and false hits through shared edges are its own answers to compare)."""
         if not (self.planes and self.lists_kind == "csr" and self.test == "watertight"):
             return None
         ncoarse = grid.cells - grid.fine_cells
-        planes = self.device.empty(16 * ncoarse, "exact: the coarse cells' planes")
+        planes = self.device.empty(32 * ncoarse, "exact: the coarse cells' planes")
         offsets, items = lists.buffers()
         self.device.kernel("exact.cl", "exact_cell_planes", options)(
-            self.device.queue, (ncoarse,), None, lists.params, offsets, items, records, np.float32(eps),
-            np.int32(grid.fine_cells), np.int32(ncoarse), planes)
+            self.device.queue, (ncoarse,), None, lists.params, offsets, items, records,
+            *(np.float32(c) for c in light_vec), np.float32(eps), np.int32(grid.fine_cells), np.int32(ncoarse), planes)
         return planes
 
     def _faces_to_list(self, mesh: Mesh, light, receiver_bounds) -> tuple[np.ndarray, int]:
