@@ -325,11 +325,20 @@ INLINE void load_starts8(__global const Start *start, lfloat *x, lfloat *y, lflo
  * stays in the enlarged cell where it meets T). A cell with no triangle is (0, 0, 0, -1, -inf): every lane
  * lit; no plane is c_hi = inf; no cover c_lo = -inf. Lanes outside `walking` are neither. */
 #define PLANE_ULPS 16.0f
-INLINE lint decided_by_plane(__global const float8 *planes, int first_coarse, lint walking, lint coarse, lfloat sx,
-                             lfloat sy, lfloat sz, float lx, float ly, float lz, float eps, lint *shadow)
+/* A plane cell: PLANE_SIDE x PLANE_SIDE fine cells of a coarse cell (PLANE_CELLS of them); a lane's from its
+ * coarse cell (relative to the first) and its fine cell's bit in it (LS_SUB_OF) */
+#ifndef PLANE_SHIFT
+#define PLANE_SHIFT 2       /* the host passes shadowcl.exact.PLANE_SHIFT */
+#endif
+#define PLANE_CELLS ((LS_COARSE >> PLANE_SHIFT) * (LS_COARSE >> PLANE_SHIFT))
+#define PLANE_CELL(coarse, sub)                                                                      \
+    ((coarse) * PLANE_CELLS + (((sub) & (LS_COARSE - 1)) >> PLANE_SHIFT) +                           \
+     (((sub) >> LS_COARSE_SHIFT) >> PLANE_SHIFT) * (LS_COARSE >> PLANE_SHIFT))
+INLINE lint decided_by_plane(__global const float8 *planes, int first_coarse, lint walking, lint coarse, lint sub,
+                             lfloat sx, lfloat sy, lfloat sz, float lx, float ly, float lz, float eps, lint *shadow)
 {
     int at[LANES];
-    LANE_STORE(walking ? coarse - first_coarse : (lint)0, at);
+    LANE_STORE(walking ? PLANE_CELL(coarse - first_coarse, sub) : (lint)0, at);
     float px[LANES], py[LANES], pz[LANES], phi[LANES], plo[LANES], ptop[LANES], preach[LANES];
     for (int j = 0; j < LANES; ++j) {
         const float8 q = planes[at[j]];
@@ -433,6 +442,8 @@ INLINE int covers_cell(__global const float *r, __constant const float *v, int i
 #define PLANE_MAX_ENTRIES 64
 #define CELL_TRIANGLES(...)                                                                          \
     for (int k = offsets[cell]; k < offsets[cell + 1]; ++k) {                                        \
+        if (cell_masks && !(cell_masks[k - offsets[cell]] & region))                                 \
+            continue;                                                                                \
         __global const float *r = records + WT_FLOATS * items[k];                                    \
         __VA_ARGS__                                                                                  \
     }                                                                                                \
@@ -442,9 +453,9 @@ INLINE int covers_cell(__global const float *r, __constant const float *v, int i
                 __global const float *r = records + WT_FLOATS * items[k];                            \
                 __VA_ARGS__                                                                          \
             }
-NOINLINE float8 cell_plane(int cell, __constant const float *views, __global const int *offsets,
-                           __global const int *items, __global const float *records, float lx, float ly, float lz,
-                           float eps)
+NOINLINE float8 cell_plane(int cell, int part, __constant const float *views, __global const int *offsets,
+                           __global const int *items, __global const ulong *masks, __global const float *records,
+                           int first_coarse, float lx, float ly, float lz, float eps)
 {
     const float8 none = (float8)(0.0f, 0.0f, 0.0f, INFINITY, -INFINITY, INFINITY, 0.0f, 0.0f);
     int view = 0;
@@ -453,9 +464,22 @@ NOINLINE float8 cell_plane(int cell, __constant const float *views, __global con
     __constant const float *v = views + VIEW_FLOATS * view;
     const int nx = VIEW_NX(v), ny = VIEW_NY(v), base0 = VIEW_BASE0(v), nx1 = VIEW_NX1(v);
     const int ci = (cell - VIEW_BASE1(v)) % nx1, cj = (cell - VIEW_BASE1(v)) / nx1;
-    const int i0 = ci << LS_COARSE_SHIFT, i1 = SC_IMIN(i0 + LS_COARSE, nx);
-    const int j0 = cj << LS_COARSE_SHIFT, j1 = SC_IMIN(j0 + LS_COARSE, ny);
-    int entries = offsets[cell + 1] - offsets[cell];
+    /* the plane cell's fine cells, and their bits in the coarse entries' masks */
+    const int side = 1 << PLANE_SHIFT, across = LS_COARSE >> PLANE_SHIFT;
+    const int pi = part % across, pj = part / across;
+    const int i0 = (ci << LS_COARSE_SHIFT) + pi * side, i1 = SC_IMIN(i0 + side, nx);
+    const int j0 = (cj << LS_COARSE_SHIFT) + pj * side, j1 = SC_IMIN(j0 + side, ny);
+    if (i0 >= nx || j0 >= ny)
+        return none;                                       /* beyond the grid: no receiver is there */
+    ulong region = 0;
+    for (int j = j0; j < j1; ++j)
+        for (int i = i0; i < i1; ++i)
+            region |= (ulong)1 << LS_SUB_OF(i, j);
+    /* (split lists have no masks: every coarse entry counts) */
+    __global const ulong *cell_masks = masks ? masks + (offsets[cell] - offsets[first_coarse]) : 0;
+    int entries = 0;
+    for (int k = offsets[cell]; k < offsets[cell + 1]; ++k)
+        entries += !cell_masks || (cell_masks[k - offsets[cell]] & region);
     for (int j = j0; j < j1; ++j)
         entries += offsets[base0 + j * nx + i1] - offsets[base0 + j * nx + i0];
     if (!entries)
@@ -523,15 +547,17 @@ NOINLINE float8 cell_plane(int cell, __constant const float *views, __global con
 }
 #undef CELL_TRIANGLES
 
-/* The planes of coarse cells first_coarse + k, k < ncoarse, for decided_by_plane (CSR lists: offsets,
- * items; watertight records; the light as the walk's) */
+/* The planes of the plane cells of coarse cells first_coarse + k, k < ncoarse (PLANE_CELLS each), for
+ * decided_by_plane (CSR lists: offsets, items, the coarse entries' fine masks; watertight records; the light
+ * as the walk's) */
 __kernel void exact_cell_planes(__constant const float *views, __global const int *offsets, __global const int *items,
-                                __global const float *records, float lx, float ly, float lz, float eps,
-                                int first_coarse, int ncoarse, __global float8 *planes)
+                                __global const ulong *masks, __global const float *records, float lx, float ly,
+                                float lz, float eps, int first_coarse, int ncoarse, __global float8 *planes)
 {
     const int k = get_global_id(0);
-    if (k < ncoarse)
-        planes[k] = cell_plane(first_coarse + k, views, offsets, items, records, lx, ly, lz, eps);
+    if (k < ncoarse * PLANE_CELLS)
+        planes[k] = cell_plane(first_coarse + k / PLANE_CELLS, k % PLANE_CELLS, views, offsets, items, masks,
+                               records, first_coarse, lx, ly, lz, eps);
 }
 
 #define BIN_ARGS                                                                                     \
@@ -554,8 +580,8 @@ INLINE void bin_packet(int base, __global const input_t *points, __global const 
     lint cells = (codes == WALK) ? receiver_cell(views, brute_cell, sx, sy, sz, &coarse, &sub) : (lint)-1;
     if (first_coarse >= 0) {
         lint shadow;
-        const lint lit = decided_by_plane(planes, first_coarse, (cells >= 0) & (coarse >= 0), coarse, sx, sy, sz, lx,
-                                          ly, lz, eps, &shadow);
+        const lint lit = decided_by_plane(planes, first_coarse, (cells >= 0) & (coarse >= 0), coarse, sub, sx, sy, sz,
+                                          lx, ly, lz, eps, &shadow);
         codes = shadow ? (lint)1 : codes;
         cells = (lit | shadow) ? (lint)-1 : cells;
     }

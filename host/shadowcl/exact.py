@@ -155,6 +155,7 @@ LISTS = ("csr", "linked")
 ORDERS = ("cells", "caller")
 CULL_FROM_LIGHTS = 64     # many-lights calls cull from this many lights (the certificate pays: docs/exact-speed.md)
 BIN_LANES = 8             # receivers per packet in 'cells' order (kernels/vecmath.h LANES)
+PLANE_SHIFT = 2           # a plane cell is 2 ** PLANE_SHIFT fine cells square (kernels/exact.cl decided_by_plane)
 FAR = 5                   # the code of a point beyond the near box (kernels/exact.cl)
 DOT5_FLOATS = 16          # kernels/ray_triangle.h
 WT_FLOATS = 32
@@ -312,6 +313,7 @@ class ExactMethod(Method):
             f"-DINPUT_F64={int(self._fp64)}",
             f"-DWT_REFINE_F64={int(self._fp64)}",
             f"-DLANES={BIN_LANES if self.order == 'cells' else 1}",
+            f"-DPLANE_SHIFT={PLANE_SHIFT}",
         )
         if isinstance(light, PointLight):
             light_vec = (light.position - origin).astype(np.float32)
@@ -367,10 +369,11 @@ class ExactMethod(Method):
         if not (self.planes and self.lists_kind == "csr" and self.test == "watertight"):
             return None
         ncoarse = grid.cells - grid.fine_cells
-        planes = self.device.empty(32 * ncoarse, "exact: the coarse cells' planes")
+        nplanes = ncoarse * (lightspace.COARSE >> PLANE_SHIFT) ** 2
+        planes = self.device.empty(32 * nplanes, "exact: the plane cells' planes")
         offsets, items = lists.buffers()
         self.device.kernel("exact.cl", "exact_cell_planes", options)(
-            self.device.queue, (ncoarse,), None, lists.params, offsets, items, records,
+            self.device.queue, (nplanes,), None, lists.params, offsets, items, lists.fine_masks, records,
             *(np.float32(c) for c in light_vec), np.float32(eps), np.int32(grid.fine_cells), np.int32(ncoarse), planes)
         return planes
 
