@@ -377,16 +377,13 @@ INLINE lint decided_by_plane(__global const float8 *planes, int first_coarse, li
  * cell to the view's domain), enlarged by PLANE_CELL_MARGIN fine cells: are the enlarged cell's four corner lines (from the light, or along a
  * directional light's travel) inside T's three edge planes by more than the cone test's bound? The corners
  * solved from the view's rows in float32 (off by ~1e-6 of a cell's coordinates, far inside the margin);
- * the margin also covers the receivers' cells' rounding and the computed segments' direction. Cube faces
- * and orthographic views; a single perspective view's (its rows carry the far eye) is not covered. */
+ * the margin also covers the receivers' cells' rounding and the computed segments' direction. */
 #define PLANE_CELL_MARGIN 0.125f
 INLINE int covers_cell(__global const float *r, __constant const float *v, int i0, int i1, int j0, int j1,
                        float lx, float ly, float lz)
 {
-#if PERSPECTIVE && NVIEWS == 1
-    return 0;
-#else
-    /* rows a, b, c of the system (the cube: M d = (x, y, 1) w; orthographic: [Mx; My; travel] p = (x - cx,
+    /* rows a, b, c of the system (perspective: M d = (x, y, 1) w for the direction d from the light, whose
+     * position a single view's constant column carries as -M eye; orthographic: [Mx; My; travel] p = (x - cx,
      * y - cy, 0)), solved by Cramer's rule */
     const float a0 = v[4], a1 = v[5], a2 = v[6], b0 = v[8], b1 = v[9], b2 = v[10];
 #if PERSPECTIVE
@@ -426,7 +423,6 @@ INLINE int covers_cell(__global const float *r, __constant const float *v, int i
                 return 0;
     }
     return 1;
-#endif
 }
 
 /* The planes of coarse cell `cell` for decided_by_plane, from its triangles' watertight records (corners,

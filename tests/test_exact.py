@@ -1003,3 +1003,26 @@ def test_a_sheet_hovering_over_the_ground_is_not_hidden_by_its_plane(device, rng
             # a sheet within float32's band of the ground leaves every receiver undecided: only the
             # receivers away from it must be the reference's
             check_against_reference(mask, mesh, light, points, n, eps, f"sheet {height}/eps {eps}", max_undecided=1.0)
+
+
+@pytest.mark.parametrize("light, decided", [(sc.PointLight((0.3, 1.5, -0.2)), True), (sc.PointLight((4.0, 0.4, 3.0)), False),
+                                            (sc.DirectionalLight((0.2, -1.0, 0.1)), True),
+                                            (sc.DirectionalLight((1.0, -0.05, 0.3)), False)],
+                         ids=["point-above", "point-low", "directional", "directional-grazing"])
+def test_receivers_behind_a_covering_face_are_decided_in_shadow(device, rng, light, decided):
+    """Receivers on the underside of a slab are in shadow. Where the light sees the slab's top face
+    broadly, it covers most of their cells, and most are answered in the first pass without a walk (those
+    near the slab's edges, its top's diagonal, where neither of its two triangles covers a cell alone, and
+    in border cells are walked); at grazing light the faces are thin bands across the cells, which none
+    covers, and they are walked. The mask is the walk's either way."""
+    slab = box((-2.0, -0.1, -2.0), (2.0, 0.0, 2.0))
+    xz = rng.uniform(-1.99, 1.99, (20000, 2))
+    points = np.column_stack([xz[:, 0], np.full(len(xz), -0.1), xz[:, 1]])
+    normals = np.tile([0.0, -1.0, 0.0], (len(points), 1))
+    for n in (None, -normals):         # without normals, and with normals turned up (as if facing the light)
+        mask, method = classify(slab, light, points, n, device=device, resolution=256)
+        walked_all, _ = classify(slab, light, points, n, device=device, resolution=256, planes=False)
+        assert np.array_equal(mask, walked_all)
+        assert mask.all()
+        if decided:
+            assert method.stats["walked"] < 0.5 * len(points), "no shadow decided: the test tests nothing"
