@@ -306,27 +306,30 @@ INLINE void load_starts8(__global const Start *start, lfloat *x, lfloat *y, lflo
 }
 #endif
 
-/* Receivers decided without a walk. Each coarse cell may have a plane (exact_cell_planes), n.x = c_hi,
- * with every triangle that a receiver of the cell can walk (the coarse cell's list and its fine cells'
- * lists) on or behind it, in exact arithmetic on the triangles' float32 corners: a lane whose tested part
- * of the segment stays strictly in front of it meets none of them, and is lit. The plane is a triangle T's,
- * and when T covers the whole cell as the light sees it (every line from the light through the cell, the
- * cell enlarged by PLANE_CELL_MARGIN, passes through T by more than the cone test's bound), a lane whose
- * tested part starts behind T (n.x < c_lo: T's corners lie in c_lo <= n.x <= c_top) and ends in front of it
- * (n.x > c_top) crosses T, and is in shadow. Most receivers on a ground plane, or on a solid's faces, are
- * decided so in the count pass and never binned, filled or walked.
+/* Receivers decided without a walk. Each plane cell (a square of 2^PLANE_SHIFT fine cells in a coarse cell)
+ * may have a plane (exact_cell_planes), n.x = c_hi, with every triangle that a receiver of the cell can walk
+ * (its fine cells' lists, and the coarse cell's entries that touch them) on or behind it, in exact
+ * arithmetic on the triangles' float32 corners: a lane whose tested part of the segment stays strictly in
+ * front of it meets none of them, and is lit. The plane is a triangle T's, and when T covers the whole cell
+ * as the light sees it (every line from the light through the cell, the cell enlarged by PLANE_CELL_MARGIN,
+ * passes through T by more than the cone test's bound), a lane whose tested part starts behind T (n.x <
+ * c_lo: T's corners lie in c_lo <= n.x <= c_top) and ends in front of it (n.x > c_top) crosses T, and is in
+ * shadow. Most receivers on a ground plane, or on a solid's faces, are decided so in the count pass and
+ * never binned, filled or walked.
  * Along the segment n.(s + t d) = n.s + t n.d. The float32 sums n.s and n.d (4 products, FP_CONTRACT off)
- * are off by at most 4 ulps of their terms' magnitudes ms, md; PLANE_ULPS allowed. The walk's tmin =
- * eps / |d| (eps for a directional light) lies in [eps / D, eps / M] for D = |d|_1 and M = max |d_i|,
- * each rounded outwards: lit when n.s - c_hi + (eps / D) n.d > 0 (n.d >= 0) by more than the rounding
- * (multiplied by D: no division), in shadow when n.s + (eps / M) n.d < c_lo and n.(s + d) > c_top (a point
- * light; a directional light's ray goes on) by more than it, with |d|_1 within the cell's reach (point
- * light: 16 times T's distance from the light, so that the computed segment's direction, off by ~1e-7,
- * stays in the enlarged cell where it meets T). A cell with no triangle is (0, 0, 0, -1, -inf): every lane
- * lit; no plane is c_hi = inf; no cover c_lo = -inf. Lanes outside `walking` are neither. */
+ * are off by at most 4 ulps of their terms' magnitudes ms, md; PLANE_ULPS allowed. The walk's tmin = eps /
+ * |d| (eps for a directional light) lies in [eps / D, eps / M] for D = |d|_1 and M = max |d_i|, each rounded
+ * outwards: lit when n.s - c_hi + (eps / D) n.d > 0 (n.d >= 0) by more than the rounding (multiplied by D:
+ * no division), in shadow when n.s + (eps / M) n.d < c_lo and n.(s + d) > c_top (a point light; a
+ * directional light's ray goes on) by more than it, with |d|_1 within the cell's reach (point light: 16
+ * times T's distance from the light, so that the computed segment's direction, off by ~1e-7, stays in the
+ * enlarged cell where it meets T). A cell with no triangle is (0, 0, 0, -1, -inf): every lane lit; no plane
+ * is c_hi = inf; no cover c_lo = -inf. Lanes outside `walking` are neither. */
 #define PLANE_ULPS 16.0f
-/* A plane cell: PLANE_SIDE x PLANE_SIDE fine cells of a coarse cell (PLANE_CELLS of them); a lane's from its
- * coarse cell (relative to the first) and its fine cell's bit in it (LS_SUB_OF) */
+/* The plane cells: PLANE_CELLS per coarse cell; a lane's from its coarse cell (relative to the first) and
+ * its fine cell's bit in it (LS_SUB_OF). 4 x 4 fine cells: against 2 x 2 and 8 x 8 (interleaved, one-shot,
+ * 1.2 M receivers) best or level on the default scene, light_inside and city_block, with normals and without
+ * (docs/exact-speed.md). */
 #ifndef PLANE_SHIFT
 #define PLANE_SHIFT 2       /* the host passes shadowcl.exact.PLANE_SHIFT */
 #endif
@@ -373,11 +376,12 @@ INLINE lint decided_by_plane(__global const float8 *planes, int first_coarse, li
     return walking & (B >= 0.0f) & (AD + eB > u * (SC_LABS(AD) + eB));
 }
 
-/* Does T (a watertight record) cover the coarse cell of fine cells [i0, i1) x [j0, j1) of view v (a border
- * cell to the view's domain), enlarged by PLANE_CELL_MARGIN fine cells: are the enlarged cell's four corner lines (from the light, or along a
- * directional light's travel) inside T's three edge planes by more than the cone test's bound? The corners
- * solved from the view's rows in float32 (off by ~1e-6 of a cell's coordinates, far inside the margin);
- * the margin also covers the receivers' cells' rounding and the computed segments' direction. */
+/* Does T (a watertight record) cover the plane cell of fine cells [i0, i1) x [j0, j1) of view v (a border
+ * cell to the view's domain), enlarged by PLANE_CELL_MARGIN fine cells: are the enlarged cell's four corner
+ * lines (from the light, or along a directional light's travel) inside T's three edge planes by more than
+ * the cone test's bound? The corners solved from the view's rows in float32 (off by ~1e-6 of a cell's
+ * coordinates, far inside the margin); the margin also covers the receivers' cells' rounding and the
+ * computed segments' direction. */
 #define PLANE_CELL_MARGIN 0.125f
 INLINE int covers_cell(__global const float *r, __constant const float *v, int i0, int i1, int j0, int j1,
                        float lx, float ly, float lz)
@@ -425,16 +429,17 @@ INLINE int covers_cell(__global const float *r, __constant const float *v, int i
     return 1;
 }
 
-/* The planes of coarse cell `cell` for decided_by_plane, from its triangles' watertight records (corners,
- * unit normal, the light's side fL and its bound; the edge planes): T is one of them, its plane oriented
+/* The planes of plane cell `part` of coarse cell `cell` for decided_by_plane, from its triangles' watertight
+ * records (corners, unit normal, the light's side fL and its bound; the edge planes): T is one of them, its
+ * plane oriented
  * towards the light (either winding: a plane has no front of its own here): of those whose plane certainly
  * misses the light and has the centroid of the cell's corners behind it (within eps), the one nearest to
  * the centroid (a slab's top face, not its sides or bottom). c_hi is T's plane moved out past every corner
  * of the cell's triangles by their rounding; none when a corner lies more than eps in front of it (the
  * plane could then decide no receiver lying on its face), or when the cell's lists hold more than
  * PLANE_MAX_ENTRIES entries: a ground's cells hold a few, and a cell crowded with a model's triangles
- * seldom has a plane (bunny: the planes' kernel 5.7 ms with no limit). Written to planes[0] (float8: n,
- * c_hi, c_lo, c_top, reach, 0). */
+ * seldom has a plane (bunny: the planes' kernel 5.7 ms with no limit). Returned as a float8: n, c_hi, c_lo,
+ * c_top, reach, 0. */
 #define PLANE_MAX_ENTRIES 64
 #define CELL_TRIANGLES(...)                                                                          \
     for (int k = offsets[cell]; k < offsets[cell + 1]; ++k) {                                        \
