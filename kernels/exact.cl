@@ -337,11 +337,36 @@ INLINE void load_starts8(__global const Start *start, lfloat *x, lfloat *y, lflo
 #define PLANE_CELL(coarse, sub)                                                                      \
     ((coarse) * PLANE_CELLS + (((sub) & (LS_COARSE - 1)) >> PLANE_SHIFT) +                           \
      (((sub) >> LS_COARSE_SHIFT) >> PLANE_SHIFT) * (LS_COARSE >> PLANE_SHIFT))
-INLINE lint decided_by_plane(__global const float8 *planes, int first_coarse, lint walking, lint coarse, lint sub,
-                             lfloat sx, lfloat sy, lfloat sz, float lx, float ly, float lz, float eps, lint *shadow)
+INLINE lint decided_by_plane(__global const float8 *planes, int first_coarse, float extent, lint walking, lint coarse,
+                             lint sub, lfloat sx, lfloat sy, lfloat sz, float lx, float ly, float lz, float eps,
+                             lint *shadow)
 {
+    walking = walking & (SC_LABS(sx) <= extent) & (SC_LABS(sy) <= extent) & (SC_LABS(sz) <= extent);
     int at[LANES];
     LANE_STORE(walking ? PLANE_CELL(coarse - first_coarse, sub) : (lint)0, at);
+#if WHOLE_PACKETS
+    /* the lanes' planes as 8 vector loads, transposed by shuffles (an 8 x 8 transpose in 24) */
+    lfloat nx, ny, nz, c_hi, c_lo, c_top, reach;
+    {
+        const float8 r0 = planes[at[0]], r1 = planes[at[1]], r2 = planes[at[2]], r3 = planes[at[3]];
+        const float8 r4 = planes[at[4]], r5 = planes[at[5]], r6 = planes[at[6]], r7 = planes[at[7]];
+#define UNPACK(a, b, hi) __builtin_shufflevector(a, b, 0 + 2 * (hi), 8 + 2 * (hi), 1 + 2 * (hi), 9 + 2 * (hi), \
+                                                 4 + 2 * (hi), 12 + 2 * (hi), 5 + 2 * (hi), 13 + 2 * (hi))
+#define PAIRS(a, b, hi) __builtin_shufflevector(a, b, 0 + 2 * (hi), 1 + 2 * (hi), 8 + 2 * (hi), 9 + 2 * (hi), \
+                                                4 + 2 * (hi), 5 + 2 * (hi), 12 + 2 * (hi), 13 + 2 * (hi))
+#define HALVES(a, b, hi) __builtin_shufflevector(a, b, 0 + 4 * (hi), 1 + 4 * (hi), 2 + 4 * (hi), 3 + 4 * (hi), \
+                                                 8 + 4 * (hi), 9 + 4 * (hi), 10 + 4 * (hi), 11 + 4 * (hi))
+        const float8 t0 = UNPACK(r0, r1, 0), t1 = UNPACK(r0, r1, 1), t2 = UNPACK(r2, r3, 0), t3 = UNPACK(r2, r3, 1);
+        const float8 t4 = UNPACK(r4, r5, 0), t5 = UNPACK(r4, r5, 1), t6 = UNPACK(r6, r7, 0), t7 = UNPACK(r6, r7, 1);
+        const float8 u0 = PAIRS(t0, t2, 0), u1 = PAIRS(t0, t2, 1), u2 = PAIRS(t1, t3, 0), u3 = PAIRS(t1, t3, 1);
+        const float8 u4 = PAIRS(t4, t6, 0), u5 = PAIRS(t4, t6, 1), u6 = PAIRS(t5, t7, 0), u7 = PAIRS(t5, t7, 1);
+        nx = HALVES(u0, u4, 0); ny = HALVES(u1, u5, 0); nz = HALVES(u2, u6, 0); c_hi = HALVES(u3, u7, 0);
+        c_lo = HALVES(u0, u4, 1); c_top = HALVES(u1, u5, 1); reach = HALVES(u2, u6, 1);
+#undef UNPACK
+#undef PAIRS
+#undef HALVES
+    }
+#else
     float px[LANES], py[LANES], pz[LANES], phi[LANES], plo[LANES], ptop[LANES], preach[LANES];
     for (int j = 0; j < LANES; ++j) {
         const float8 q = planes[at[j]];
@@ -349,6 +374,8 @@ INLINE lint decided_by_plane(__global const float8 *planes, int first_coarse, li
     }
     const lfloat nx = LANE_LOAD(float, px), ny = LANE_LOAD(float, py), nz = LANE_LOAD(float, pz);
     const lfloat c_hi = LANE_LOAD(float, phi), c_lo = LANE_LOAD(float, plo), c_top = LANE_LOAD(float, ptop);
+    const lfloat reach = LANE_LOAD(float, preach);
+#endif
     lfloat dx, dy, dz;
     to_light(sx, sy, sz, lx, ly, lz, &dx, &dy, &dz);
     const float u = PLANE_ULPS * 0.5f * FLT_EPSILON;
@@ -364,11 +391,12 @@ INLINE lint decided_by_plane(__global const float8 *planes, int first_coarse, li
     const lfloat D = d1 * (1.0f + 0x1p-20f);
     const lfloat t_hi = (eps * (1.0f + 0x1p-20f)) / M;
     const lfloat end = (ns - u * ms) + B;                  /* <= n.(s + d) */
-    const lint ends_in_front = (end > c_top + u * (SC_LABS(c_top) + ms + md)) & (d1 <= LANE_LOAD(float, preach));
+    const lint ends_in_front = (end > c_top + u * (SC_LABS(c_top) + ms + md)) & (d1 <= reach);
 #else
     const lfloat D = (lfloat)1.0f;
     const lfloat t_hi = (lfloat)eps;
-    const lint ends_in_front = (lint)-1;
+    /* the ray goes on; it meets T's slab within the cell's reach */
+    const lint ends_in_front = c_top - (ns - u * ms) <= reach * B;
 #endif
     const lfloat AD = A * D, eB = eps * B;
     const lfloat starts = (ns + u * ms) + t_hi * (nd + u * md);     /* >= n.(s + tmin d) */
@@ -386,9 +414,8 @@ INLINE lint decided_by_plane(__global const float8 *planes, int first_coarse, li
 INLINE int covers_cell(__global const float *r, __constant const float *v, int i0, int i1, int j0, int j1,
                        float lx, float ly, float lz)
 {
-    /* rows a, b, c of the system (perspective: M d = (x, y, 1) w for the direction d from the light, whose
-     * position a single view's constant column carries as -M eye; orthographic: [Mx; My; travel] p = (x - cx,
-     * y - cy, 0)), solved by Cramer's rule */
+    /* rows a, b, c of the system (the cube: M d = (x, y, 1) w for the direction d from the light; orthographic:
+     * [Mx; My; travel] p = (x - cx, y - cy, 0)), solved by Cramer's rule */
     const float a0 = v[4], a1 = v[5], a2 = v[6], b0 = v[8], b1 = v[9], b2 = v[10];
 #if PERSPECTIVE
     const float c0 = v[12], c1 = v[13], c2 = v[14];
@@ -456,7 +483,7 @@ INLINE int covers_cell(__global const float *r, __constant const float *v, int i
             }
 NOINLINE float8 cell_plane(int cell, int part, __constant const float *views, __global const int *offsets,
                            __global const int *items, __global const ulong *masks, __global const float *records,
-                           int first_coarse, float lx, float ly, float lz, float eps)
+                           int first_coarse, float lx, float ly, float lz, float eps, float extent)
 {
     const float8 none = (float8)(0.0f, 0.0f, 0.0f, INFINITY, -INFINITY, INFINITY, 0.0f, 0.0f);
     int view = 0;
@@ -528,7 +555,7 @@ NOINLINE float8 cell_plane(int cell, int part, __constant const float *views, __
 #if LIGHT_POINT
         out.s6 = 16.0f * (SC_ABS(best[12]) - best[13]);    /* |d|_1 beyond it: no shadow decided */
 #else
-        out.s6 = INFINITY;
+        out.s6 = extent;                                   /* T farther along the ray: none either */
 #endif
     }
     out.s0 = bx; out.s1 = by; out.s2 = bz;
@@ -553,12 +580,13 @@ NOINLINE float8 cell_plane(int cell, int part, __constant const float *views, __
  * as the walk's) */
 __kernel void exact_cell_planes(__constant const float *views, __global const int *offsets, __global const int *items,
                                 __global const ulong *masks, __global const float *records, float lx, float ly,
-                                float lz, float eps, int first_coarse, int ncoarse, __global float8 *planes)
+                                float lz, float eps, float extent, int first_coarse, int ncoarse,
+                                __global float8 *planes)
 {
     const int k = get_global_id(0);
     if (k < ncoarse * PLANE_CELLS)
         planes[k] = cell_plane(first_coarse + k / PLANE_CELLS, k % PLANE_CELLS, views, offsets, items, masks,
-                               records, first_coarse, lx, ly, lz, eps);
+                               records, first_coarse, lx, ly, lz, eps, extent);
 }
 
 #define BIN_ARGS                                                                                     \
@@ -573,7 +601,7 @@ __kernel void exact_cell_planes(__constant const float *views, __global const in
 INLINE void bin_packet(int base, __global const input_t *points, __global const input_t *normals, int n,
                        const Move *m, __constant const float *views, int brute_cell, float lx, float ly, float lz,
                        float eps, int with_normals, __global const float8 *planes, int first_coarse,
-                       __global uchar *out, __global Start *start, int *cell)
+                       float plane_extent, __global uchar *out, __global Start *start, int *cell)
 {
     lfloat sx, sy, sz;
     lint codes = receivers_start(base, n, points, normals, m, lx, ly, lz, eps, with_normals, &sx, &sy, &sz);
@@ -581,8 +609,8 @@ INLINE void bin_packet(int base, __global const input_t *points, __global const 
     lint cells = (codes == WALK) ? receiver_cell(views, brute_cell, sx, sy, sz, &coarse, &sub) : (lint)-1;
     if (first_coarse >= 0) {
         lint shadow;
-        const lint lit = decided_by_plane(planes, first_coarse, (cells >= 0) & (coarse >= 0), coarse, sub, sx, sy, sz,
-                                          lx, ly, lz, eps, &shadow);
+        const lint lit = decided_by_plane(planes, first_coarse, plane_extent, (cells >= 0) & (coarse >= 0), coarse, sub,
+                                          sx, sy, sz, lx, ly, lz, eps, &shadow);
         codes = shadow ? (lint)1 : codes;
         cells = (lit | shadow) ? (lint)-1 : cells;
     }
@@ -625,8 +653,8 @@ INLINE void bin_packet(int base, __global const input_t *points, __global const 
  *                         walk, one per lane (not scanned), so that the loop has no branch, and no chain
  *                         of increments of one counter (with most receivers decided by decided_by_plane, one
  *                         counter for them all cost the pass ~2 ms on the default scene). */
-__kernel void exact_bin_count(BIN_ARGS, __global const float8 *planes, int first_coarse, __global int *counts,
-                              __global int *slot, __global uchar *out, __global Start *start)
+__kernel void exact_bin_count(BIN_ARGS, __global const float8 *planes, int first_coarse, float plane_extent,
+                              __global int *counts, __global int *slot, __global uchar *out, __global Start *start)
 {
     const int base = LANES * get_global_id(0);
     if (base >= n)
@@ -634,13 +662,13 @@ __kernel void exact_bin_count(BIN_ARGS, __global const float8 *planes, int first
     const Move m = MOVE_OF_ARGS;
     int cell[LANES];
     bin_packet(base, points, normals, n, &m, views, brute_cell, lx, ly, lz, eps, with_normals, planes,
-                   first_coarse, out, start, cell);
+                   first_coarse, plane_extent, out, start, cell);
     for (int j = 0; j < LANES && base + j < n; ++j)
         slot[base + j] = (cell[j] >= 0) ? atomic_inc(&counts[cell[j]]) : -1;
 }
 
-__kernel void exact_bin_count_ends(BIN_ARGS, __global const float8 *planes, int first_coarse, int per_end,
-                                   __global int *counts, __global uchar *out, __global Start *start)
+__kernel void exact_bin_count_ends(BIN_ARGS, __global const float8 *planes, int first_coarse, float plane_extent,
+                                   int per_end, __global int *counts, __global uchar *out, __global Start *start)
 {
     const int end = get_global_id(0), spare = brute_cell + 1;
     const int last = SC_IMIN(n, (end + 1) * per_end * LANES);
@@ -649,7 +677,7 @@ __kernel void exact_bin_count_ends(BIN_ARGS, __global const float8 *planes, int 
     for (int base = end * per_end * LANES; base < last; base += LANES) {
         int cell[LANES];
         bin_packet(base, points, normals, n, &m, views, brute_cell, lx, ly, lz, eps, with_normals, planes,
-                   first_coarse, out, start, cell);
+                   first_coarse, plane_extent, out, start, cell);
         for (int j = 0; j < LANES && base + j < n; ++j)
             ++row[cell[j] >= 0 ? cell[j] : spare + j];
     }

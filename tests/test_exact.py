@@ -186,7 +186,7 @@ def test_receiver_binning_that_drops_receivers_raises(device, monkeypatch, both_
     one per cell, so that every cell holding several receivers overflows (from either end)."""
     mesh, points, normals = random_scene(7, True)
     real = type(device).kernel
-    counts_at = {"exact_bin_count": 25, "exact_bin_count_ends": 26}    # after the 23 BIN_ARGS, the planes (and per_end)
+    counts_at = {"exact_bin_count": 26, "exact_bin_count_ends": 27}    # after the 23 BIN_ARGS, the planes (and per_end)
 
     def cut_counts(self, filename, name, options=()):
         kernel = real(self, filename, name, options)
@@ -1026,3 +1026,32 @@ def test_receivers_behind_a_covering_face_are_decided_in_shadow(device, rng, lig
         assert mask.all()
         if decided:
             assert method.stats["walked"] < 0.5 * len(points), "no shadow decided: the test tests nothing"
+
+
+def test_receivers_whose_cells_float32_cannot_place_are_walked(device):
+    """The red team's two cases (2026-12-07): receivers 1e6 below a sheet lit by a directional light (an
+    orthographic view finds their cells to ~2^-22 (|Mx|_1 |p| + |cx|) cells: here 8 cells off), and a
+    single perspective view whose local origin lies 1e6 away (its rows carry the eye in their constants).
+    Their rays miss the sheet, which covered the cells their floats named: the planes decided them in
+    shadow. Now a plane decides only within its view's extent, and a single perspective view has none."""
+    sheet = sc.Mesh(np.array([[-1.0, 0, -1], [1, 0, -1], [1, 0, 1], [-1, 0, 1]]), [[0, 1, 2], [0, 2, 3]])
+    light = sc.DirectionalLight((2, -1, 1))
+    far = np.array([[2000000.375, -1000000.0, 1000001.0625]])          # its ray meets y = 0 at z = 1.0625
+    points = np.concatenate([np.repeat(far, 8, axis=0), [[1999999.0, -1000000.0, 999998.9375],
+                                                          [2000001.0, -1000000.0, 1000001.0625]]])
+    eps = default_eps(sheet.bounds)
+    for planes in (True, False):
+        mask, _ = classify(sheet, light, points, eps=eps, device=device, resolution=256, planes=planes)
+        assert not mask[:8].any(), f"planes={planes}"
+    X0 = 1e6
+    vertices = np.concatenate([np.array([[-1.0, 0, -1], [1, 0, -1], [1, 0, 1], [-1, 0, 1]]) + [X0, 0, 0],
+                               [[-X0, 0, 0], [-X0 + 1e-3, 0, 0], [-X0, 0, 1e-3]]])
+    mesh = sc.Mesh(vertices, [[0, 1, 2], [0, 2, 3], [4, 5, 6]])
+    light = sc.PointLight((X0 + 0.125, 10.0, 0.0625))
+    z = np.linspace(-0.5, 0.5, 64).astype(np.float32).astype(np.float64)
+    points = np.column_stack([np.full(64, 999998.9375), np.full(64, -0.5), z])   # lines miss the sheet by 0.006
+    bounds = np.array([[999998.625, -0.5, -1.3681180477142334], [1000001.375, -0.5, 1.3618615865707397]])
+    for planes in (True, False):
+        mask, method = classify(mesh, light, points, eps=1e-4, device=device, receiver_bounds=bounds,
+                                expected_receivers=150000, planes=planes)
+        assert method.stats["view_kind"] == "perspective" and not mask.any(), f"planes={planes}"

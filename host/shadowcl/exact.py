@@ -362,20 +362,37 @@ class ExactMethod(Method):
         )
 
     def _cell_planes(self, grid, lists, records: cl.Buffer, light_vec: np.ndarray, eps: float,
-                     options) -> cl.Buffer | None:
-        """Each coarse cell's plane for the first pass's lit receivers (kernels/exact.cl exact_cell_planes), or
-        None when off: with linked lists (no list per cell to read as a range) and with dot5 (the paper's
-        test, whose leaks and false hits through shared edges are its own answers to compare)."""
+                     options) -> tuple[cl.Buffer, float] | None:
+        """The plane cells' planes for the first pass's decided receivers (kernels/exact.cl exact_cell_planes) and
+        the extent (local coordinates) within which a receiver may be decided by them, or None when off: with
+        linked lists (no list per cell to read as a range), with dot5 (the paper's test, whose leaks and false
+        hits through shared edges are its own answers to compare) and in a single perspective view (its rows
+        carry the far eye in their constants, so a cell is found only to ~1e-7 of |eye| (red team, 2026-12-07:
+        a local origin 1e6 away put receivers a cell off)).
+
+        The extent: a cube face finds a point's cell from p - light, correct to a few ulps of itself wherever p
+        is; an orthographic view from Mx p + cx, off by up to 2^-22 (|Mx|_1 |p|_inf + |cx|) cells, which stays
+        below 1/64 of a cell (the lists' own allowance) for |p|_inf up to the extent. A ray to a directional
+        light is decided in shadow only when it meets the covering triangle within the extent too."""
         if not (self.planes and self.lists_kind == "csr" and self.test == "watertight"):
             return None
+        views = grid.views
+        if views.kind == "perspective":
+            return None
+        extent = np.inf
+        if not views.perspective:
+            rows = np.abs(grid.params[:, [4, 5, 6, 8, 9, 10]]).reshape(-1, 2, 3).sum(axis=2).max()
+            consts = np.abs(grid.params[:, [7, 11]]).max()
+            extent = max(0.0, (2.0 ** 16 - float(consts)) / max(float(rows), 1e-30))
         ncoarse = grid.cells - grid.fine_cells
         nplanes = ncoarse * (lightspace.COARSE >> PLANE_SHIFT) ** 2
         planes = self.device.empty(32 * nplanes, "exact: the plane cells' planes")
         offsets, items = lists.buffers()
         self.device.kernel("exact.cl", "exact_cell_planes", options)(
             self.device.queue, (nplanes,), None, lists.params, offsets, items, lists.fine_masks, records,
-            *(np.float32(c) for c in light_vec), np.float32(eps), np.int32(grid.fine_cells), np.int32(ncoarse), planes)
-        return planes
+            *(np.float32(c) for c in light_vec), np.float32(eps), np.float32(extent), np.int32(grid.fine_cells),
+            np.int32(ncoarse), planes)
+        return planes, extent
 
     def _faces_to_list(self, mesh: Mesh, light, receiver_bounds) -> tuple[np.ndarray, int]:
         """``mesh.faces`` reordered so that those to list for ``light`` come first, and how many they are:
@@ -568,9 +585,9 @@ class ExactMethod(Method):
         light = [np.float32(c) for c in self._light_vec]
         bin_args = (points_dev, normals_dev, np.int32(n), *origin, self.lists.params, np.int32(brute_cell),
                     *light, np.float32(self.eps), np.int32(normals is not None))
-        # the first pass's lit receivers (None: every receiver walks; the buffer then is never read)
-        planes = (self._planes, np.int32(self.grid.fine_cells)) if self._planes is not None else \
-            (self.lists.params, np.int32(-1))
+        # the first pass's decided receivers (None: every receiver walks; the buffer then is never read)
+        planes = (self._planes[0], np.int32(self.grid.fine_cells), np.float32(self._planes[1])) \
+            if self._planes is not None else (self.lists.params, np.int32(-1), np.float32(0))
         walk_coarse = np.int32(self.lists.coarse_entries != 0)
         lists_a, lists_b = self.lists.buffers()
         out_dev = dev.scratch("exact: classify output", n)
