@@ -259,9 +259,10 @@ class ExactMethod(Method):
                         "certificate is made once per mesh, in NumPy (0.01-0.8 s on the "
                         "bench scenes: several one-shot calls), so it pays over many lights: shadow_counts and "
                         "shadow_matrix turn it on from CULL_FROM_LIGHTS lights unless told"),
-        "planes": (True, "csr lists, watertight test: give each coarse cell a plane with all the triangles its "
-                         "receivers walk behind it (a triangle's: lit in front of it; in shadow behind it when "
-                         "the triangle covers the cell) and answer such receivers in the binning's first pass, "
+        "planes": (True, "csr lists, watertight test: give each plane cell (4 x 4 fine cells) a plane with all "
+                         "the triangles its receivers walk behind it (a triangle's: lit in front of it; in shadow "
+                         "behind it when the triangle covers the cell) and answer such receivers in the binning's "
+                         "first pass, "
                          "without binning or walking them (kernels/exact.cl decided_by_plane); the same "
                          "answers. Off: every receiver is walked"),
     }
