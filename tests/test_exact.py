@@ -404,12 +404,14 @@ def on_surface(mesh, count, rng):
     return points, cross[face] / area[face, None]
 
 
-def test_split_bounds_the_walk_of_a_light_inside_a_room(device, rng):
+def test_split_bounds_the_walk_of_a_light_inside_a_room(device, rng, monkeypatch):
     """Large triangles in long coarse lists are binned by pieces (split=True): every receiver's walk
     (its fine plus coarse list) is no longer than without the split, the mean walk falls by over 25%
-    (measured on this room: 17.4 -> 11.5 entries; 24.5 -> 11.4 before the coarse level went by area
-    and to 8 x 8 fine cells, which keep the thin pillar faces out of the coarse lists unsplit), and the
-    answers are the same bit for bit, since the walk still tests the original triangles."""
+    (measured on this room: 7.0 -> 3.4 entries; 17.4 -> 11.5 before the cube's windows grew back from
+    their footprints, 24.5 -> 11.4 before the coarse level went by area and to 8 x 8 fine cells), and
+    the answers are the same bit for bit, since the walk still tests the original triangles. The grown
+    windows leave this room's coarse lists below the default trigger, so the trigger is at zero here."""
+    monkeypatch.setattr(exact_module, "SPLIT_PER_COARSE_CELL", 0.0)
     mesh, light = room_with_pillars()
     points, normals = on_surface(mesh, 8000, rng)
     normals *= np.where(np.sum(normals * (light.position - points), axis=1) < 0, -1.0, 1.0)[:, None]   # lit side
@@ -419,7 +421,7 @@ def test_split_bounds_the_walk_of_a_light_inside_a_room(device, rng):
         masks[split], method = classify(mesh, light, points, normals, eps=eps, device=device, split=split)
         walks[split] = method.walk_lengths(points)
         assert method.stats["view_kind"] == "cube"
-        assert (method.stats["split_triangles"] > 0) == split        # the room triggers the split
+        assert (method.stats["split_triangles"] > 0) == split
     assert 0.2 < masks[False].mean() < 0.8                             # outer faces, pillar shadows: 0.63
     assert np.all(walks[True] <= walks[False]), f"{int(np.sum(walks[True] > walks[False]))} walks grew"
     assert walks[True].mean() <= 0.75 * walks[False].mean(), (walks[False].mean(), walks[True].mean())

@@ -289,17 +289,48 @@ def test_views_are_fitted_to_the_light(device):
     assert ls.fit_views(sc.PointLight((0, 0.2, 0)), lo_hi, np.zeros(3), 1.0).kind == "cube"   # inside
 
 
-def test_window_fits_small_primitives_not_large_ones(device, rng):
-    """A ground-like large quad must not stretch the window: cells go where the small primitives are."""
+def cluster_on_ground(device, rng):
+    """200 small triangles about the origin over a 10 x 10 ground quad, on the device, and the view of a
+    sun overhead fitted to the receivers' box: (views, prims, count)."""
     small = soup(rng, 200, 0.01, spread=0.1)
     ground = np.array([[[-5, -1, -5], [5, -1, -5], [5, -1, 5]], [[-5, -1, -5], [5, -1, 5], [-5, -1, 5]]], float)
     corners = np.concatenate([small, ground]).astype(np.float32)
-    prims = device.to_device(corners)
     views = ls.fit_views(sc.DirectionalLight((0, -1, 0)), np.array([[-5, -1, -5], [5, 1, 5.0]]), np.zeros(3), 10.0)
-    fitted = ls.fit_to_footprint(device, views, prims, len(corners))
+    return views, device.to_device(corners), len(corners)
+
+
+def test_window_fits_small_primitives_not_large_ones(device, rng):
+    """A ground-like large quad must not stretch the window: cells go where the small primitives are."""
+    fitted = ls.fit_to_footprint(device, *cluster_on_ground(device, rng))
     u0, u1, v0, v1 = fitted.windows[0]
     assert u1 - u0 < 0.5 and v1 - v0 < 0.5
     assert fitted.weights[0] == 200
+
+
+@pytest.mark.parametrize("cells", [1000, 5000, 20000, 200000])
+def test_a_cut_window_grows_until_its_footprint_keeps_its_resolution(device, rng, cells):
+    """Given the grid's cells, the cut window grows evenly on every side, within the first window, to the
+    area whose cells leave PRIMS_PER_CELL small triangles to each cell over the footprint (the whole first
+    window when that area is larger)."""
+    first, prims, count = cluster_on_ground(device, rng)
+    cut = ls.fit_to_footprint(device, first, prims, count)
+    grown = ls.fit_to_footprint(device, first, prims, count, cells=cells)
+    u0, u1, v0, v1 = cut.windows[0]
+    g0, g1, h0, h1 = grown.windows[0]
+    b0, b1, c0, c1 = first.windows[0]
+    view_cells = ls.view_cells(grown.weights, cells)[0]
+    target = view_cells * (u1 - u0) * (v1 - v0) * ls.PRIMS_PER_CELL / grown.weights[0]
+    assert grown.weights[0] == 200 and view_cells >= ls.MIN_VIEW_CELLS
+    assert b0 <= g0 < u0 and u1 < g1 <= b1 and c0 <= h0 < v0 and v1 < h1 <= c1
+    margins = np.array([u0 - g0, g1 - u1, v0 - h0, h1 - v1])
+    unclipped = np.array([g0 > b0, g1 < b1, h0 > c0, h1 < c1])
+    if unclipped.any():
+        assert np.ptp(margins[unclipped]) < 1e-9 * (b1 - b0)          # one margin where the bounds do not clip
+    area, whole = (g1 - g0) * (h1 - h0), (b1 - b0) * (c1 - c0)
+    if area < whole * (1 - 1e-9):
+        assert area == pytest.approx(target, rel=1e-6)
+    else:
+        assert target >= whole * (1 - 1e-9)
 
 
 BAD_INPUTS = [

@@ -341,8 +341,9 @@ class ExactMethod(Method):
         t1 = time.perf_counter()
         # Views and grid, fitted to every face: receivers lie on the culled ones too (measured on light_inside
         # without normals, fitted to the listed faces only: 49 -> 59 ms a light, some views 4 x 4 cells)
-        views = lightspace.fit_to_footprint(dev, views, tris_dev, len(faces))
         cells = lightspace.pick_cell_count(len(faces), self.expected_receivers)
+        views = lightspace.fit_to_footprint(dev, views, tris_dev, len(faces),
+                                            cells=cells if self.resolution is None else None)
         grid = lightspace.make_grid(views, cells=cells, resolution=self.resolution)
         t2 = time.perf_counter()
         lists = self._builder.build(grid, tris_dev, ntris, self.lists_kind, self.initial_capacity,
