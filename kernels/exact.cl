@@ -271,10 +271,9 @@ typedef struct {
 } Start;
 
 #if WHOLE_PACKETS
-/* The Starts of 8 consecutive receivers (lanes) and their codes, written as four 32-byte and one 8-byte
- * vector stores (the records transposed from the lanes by shuffles). start must be 32-byte aligned. */
-INLINE void store_starts8(__global Start *start, __global uchar *out, lfloat x, lfloat y, lfloat z, lint tag,
-                          lint code)
+/* The Starts of 8 consecutive receivers (lanes), written as four 32-byte vector stores (the records
+ * transposed from the lanes by shuffles). start must be 32-byte aligned. */
+INLINE void store_starts8(__global Start *start, lfloat x, lfloat y, lfloat z, lint tag)
 {
     const lfloat c = as_float8(tag);
     const lfloat xy_lo = __builtin_shufflevector(x, y, 0, 8, 1, 9, 2, 10, 3, 11);      /* x0 y0 x1 y1 x2 y2 x3 y3 */
@@ -286,7 +285,6 @@ INLINE void store_starts8(__global Start *start, __global uchar *out, lfloat x, 
     r[1] = __builtin_shufflevector(xy_lo, zc_lo, 4, 5, 12, 13, 6, 7, 14, 15);
     r[2] = __builtin_shufflevector(xy_hi, zc_hi, 0, 1, 8, 9, 2, 3, 10, 11);
     r[3] = __builtin_shufflevector(xy_hi, zc_hi, 4, 5, 12, 13, 6, 7, 14, 15);
-    *(__global uchar8 *)out = __builtin_convertvector(code, uchar8);
 }
 
 /* 8 consecutive Start records (32-byte aligned) as lanes: four 32-byte loads, transposed by shuffles
@@ -594,65 +592,61 @@ __kernel void exact_cell_planes(__constant const float *views, __global const in
         __constant const float *views, int brute_cell, float lx, float ly, float lz, float eps, int with_normals
 
 /* Pass 1's work on the packet of receivers base .. base + LANES - 1 (those below n): out[i] (the code of
- * a receiver needing no walk, else 0) and start[i] (its start and cell, -1 when it needs no walk)
- * written, the cells in cell[]. Contract: points (n x 3, float32 relative to the local origin, or float64
- * with INPUT_F64, the frame's move and the origin in m), normals likewise if with_normals (any non-zero
- * length); views: the grid the lists were built on; start: 32-byte aligned. */
+ * a receiver needing no walk, else 0) written, and the lanes' starts and cells (-1 for a receiver needing
+ * no walk) in *sx, *sy, *sz and *cells, which the callers store. Contract: points (n x 3, float32 relative
+ * to the local origin, or float64 with INPUT_F64, the frame's move and the origin in m), normals likewise
+ * if with_normals (any non-zero length); views: the grid the lists were built on. */
 INLINE void bin_packet(int base, __global const input_t *points, __global const input_t *normals, int n,
                        const Move *m, __constant const float *views, int brute_cell, float lx, float ly, float lz,
                        float eps, int with_normals, __global const float8 *planes, int first_coarse,
-                       float plane_extent, __global uchar *out, __global Start *start, int *cell)
+                       float plane_extent, __global uchar *out, lfloat *sx, lfloat *sy, lfloat *sz, lint *cells)
 {
-    lfloat sx, sy, sz;
-    lint codes = receivers_start(base, n, points, normals, m, lx, ly, lz, eps, with_normals, &sx, &sy, &sz);
+    lint codes = receivers_start(base, n, points, normals, m, lx, ly, lz, eps, with_normals, sx, sy, sz);
     lint coarse = (lint)-1, sub;
-    lint cells = (codes == WALK) ? receiver_cell(views, brute_cell, sx, sy, sz, &coarse, &sub) : (lint)-1;
+    *cells = (codes == WALK) ? receiver_cell(views, brute_cell, *sx, *sy, *sz, &coarse, &sub) : (lint)-1;
     if (first_coarse >= 0) {
         lint shadow;
-        const lint lit = decided_by_plane(planes, first_coarse, plane_extent, (cells >= 0) & (coarse >= 0), coarse, sub,
-                                          sx, sy, sz, lx, ly, lz, eps, &shadow);
+        const lint lit = decided_by_plane(planes, first_coarse, plane_extent, (*cells >= 0) & (coarse >= 0), coarse,
+                                          sub, *sx, *sy, *sz, lx, ly, lz, eps, &shadow);
         codes = shadow ? (lint)1 : codes;
-        cells = (lit | shadow) ? (lint)-1 : cells;
+        *cells = (lit | shadow) ? (lint)-1 : *cells;
     }
-    LANE_STORE(cells, cell);
 #if WHOLE_PACKETS
-    if (base + LANES <= n)
-        store_starts8(start + base, out + base, sx, sy, sz, cells, codes);
-    else
-#endif
-    {
-        float x[LANES], y[LANES], z[LANES];
-        int code[LANES];
-        LANE_STORE(sx, x); LANE_STORE(sy, y); LANE_STORE(sz, z); LANE_STORE(codes, code);
-        for (int j = 0; j < LANES && base + j < n; ++j) {
-            const Start r = {x[j], y[j], z[j], cell[j]};
-            start[base + j] = r;
-            out[base + j] = (uchar)code[j];
-        }
+    if (base + LANES <= n) {
+        *(__global uchar8 *)(out + base) = __builtin_convertvector(codes, uchar8);
+        return;
     }
+#endif
+    int code[LANES];
+    LANE_STORE(codes, code);
+    for (int j = 0; j < LANES && base + j < n; ++j)
+        out[base + j] = (uchar)code[j];
 }
 
 /* Pass 1 also counts each walking receiver in its cell, in counts, which the prefix sum turns into the
  * fill's offsets. Two ways, the host picks one for its device:
- *   exact_bin_count       one packet per work-item, its slot (rank in its cell, slot[i]; -1 for a receiver
+ *   exact_bin_count       one packet per work-item: every receiver's start, tagged with its cell, at its
+ *                         index in start, and its slot (rank in its cell, slot[i]; -1 for a receiver
  *                         needing no walk) by atomic_inc on its cell's count (a GPU's
  *                         way, or a CPU's with many cores; counts: brute_cell + 1 ints, zeroed). The
  *                         atomics come last and back to back: each drains the stores before it, and
  *                         interleaved with the starts' stores they cost twice as much (bunny bench: the
  *                         pass 21 -> 15 ms).
  *   exact_bin_count_ends  2 work-items (local size 1), each binning half the packets serially and counting
- *                         them in a row of its own, counts[end (brute_cell + 1 + LANES) + cell]: no atomics (on a
- *                         2-core CPU the pass 8.6-10.4 -> 5.0-8.2 ms), and no cache line shared between
- *                         the two (counters interleaved, (cell, owner) side by side, went back and forth
- *                         between the cores: 9.3 ms against 9.6 with atomics). exact_bin_fill_ends fills
- *                         the first half's places from the cells' fronts, the second's from their backs,
- *                         so that the offsets stay one per cell (per (cell, owner) offsets made the fill
- *                         5.2 -> 8.5 ms on ogre) and a cell's receivers stay together. counts: 2
- *                         (brute_cell + 1 + LANES) ints, zeroed; the prefix sum adds the rows (lists.h
- *                         second_row); each row's last LANES entries collect the receivers that need no
- *                         walk, one per lane (not scanned), so that the loop has no branch, and no chain
- *                         of increments of one counter (with most receivers decided by decided_by_plane, one
- *                         counter for them all cost the pass ~2 ms on the default scene). */
+ *                         them in a row of its own, counts[end * ROW + cell], ROW = brute_cell + 2 + LANES:
+ *                         no atomics (on a 2-core CPU the pass 8.6-10.4 -> 5.0-8.2 ms), and no cache line
+ *                         shared between the two (counters interleaved, (cell, owner) side by side, went
+ *                         back and forth between the cores: 9.3 ms against 9.6 with atomics).
+ *                         exact_bin_fill_ends fills the first half's places from the cells' fronts, the
+ *                         second's from their backs, so that the offsets stay one per cell (per (cell,
+ *                         owner) offsets made the fill 5.2 -> 8.5 ms on ogre) and a cell's receivers stay
+ *                         together. counts: 2 ROW ints, zeroed; the prefix sum adds the rows (lists.h
+ *                         second_row). After a row's cells come LANES counters of the receivers that need
+ *                         no walk, one per lane (not scanned), so that the loop has no branch, and no
+ *                         chain of increments of one counter (with most receivers decided by
+ *                         decided_by_plane, one counter for them all cost the pass ~2 ms on the default
+ *                         scene); last, how many walk. Only those are written: packed from the end's
+ *                         first receiver on (pack_walkers), so that the fill reads nothing of the rest. */
 __kernel void exact_bin_count(BIN_ARGS, __global const float8 *planes, int first_coarse, float plane_extent,
                               __global int *counts, __global int *slot, __global uchar *out, __global Start *start)
 {
@@ -660,27 +654,69 @@ __kernel void exact_bin_count(BIN_ARGS, __global const float8 *planes, int first
     if (base >= n)
         return;
     const Move m = MOVE_OF_ARGS;
+    lfloat sx, sy, sz;
+    lint cells;
+    bin_packet(base, points, normals, n, &m, views, brute_cell, lx, ly, lz, eps, with_normals, planes, first_coarse,
+               plane_extent, out, &sx, &sy, &sz, &cells);
     int cell[LANES];
-    bin_packet(base, points, normals, n, &m, views, brute_cell, lx, ly, lz, eps, with_normals, planes,
-                   first_coarse, plane_extent, out, start, cell);
+    LANE_STORE(cells, cell);
+#if WHOLE_PACKETS
+    if (base + LANES <= n)
+        store_starts8(start + base, sx, sy, sz, cells);
+    else
+#endif
+    {
+        float x[LANES], y[LANES], z[LANES];
+        LANE_STORE(sx, x); LANE_STORE(sy, y); LANE_STORE(sz, z);
+        for (int j = 0; j < LANES && base + j < n; ++j) {
+            const Start r = {x[j], y[j], z[j], cell[j]};
+            start[base + j] = r;
+        }
+    }
     for (int j = 0; j < LANES && base + j < n; ++j)
         slot[base + j] = (cell[j] >= 0) ? atomic_inc(&counts[cell[j]]) : -1;
 }
 
+/* The walking lanes (cell >= 0) of the packet at base (those below n), packed from start[k] and cell_of[k]
+ * on: their starts tagged with their index (the fill's output records) and their cells; returns k past
+ * them. Branch-free within a packet: every lane is written at k, which only a walking lane moves on (k
+ * never passes base + j: the packing stays within the receivers already seen). */
+INLINE int pack_walkers(int k, int base, int n, lfloat sx, lfloat sy, lfloat sz, const int *cell,
+                        __global Start *start, __global int *cell_of)
+{
+    float x[LANES], y[LANES], z[LANES];
+    LANE_STORE(sx, x); LANE_STORE(sy, y); LANE_STORE(sz, z);
+    for (int j = 0; j < LANES && base + j < n; ++j) {
+        const Start r = {x[j], y[j], z[j], base + j};
+        start[k] = r;
+        cell_of[k] = cell[j];
+        k += cell[j] >= 0;
+    }
+    return k;
+}
+
 __kernel void exact_bin_count_ends(BIN_ARGS, __global const float8 *planes, int first_coarse, float plane_extent,
-                                   int per_end, __global int *counts, __global uchar *out, __global Start *start)
+                                   int per_end, __global int *counts, __global uchar *out, __global Start *start,
+                                   __global int *cell_of)
 {
     const int end = get_global_id(0), spare = brute_cell + 1;
-    const int last = SC_IMIN(n, (end + 1) * per_end * LANES);
-    __global int *row = counts + end * (brute_cell + 1 + LANES);
+    const int first = end * per_end * LANES, last = SC_IMIN(n, first + per_end * LANES);
+    __global int *row = counts + end * (brute_cell + 2 + LANES);
     const Move m = MOVE_OF_ARGS;
-    for (int base = end * per_end * LANES; base < last; base += LANES) {
-        int cell[LANES];
+    int k = first;
+    for (int base = first; base < last; base += LANES) {
+        lfloat sx, sy, sz;
+        lint cells;
         bin_packet(base, points, normals, n, &m, views, brute_cell, lx, ly, lz, eps, with_normals, planes,
-                   first_coarse, plane_extent, out, start, cell);
+                   first_coarse, plane_extent, out, &sx, &sy, &sz, &cells);
+        int cell[LANES];
+        LANE_STORE(cells, cell);
+        if (LANE_ANY(cells >= 0))
+            k = pack_walkers(k, base, n, sx, sy, sz, cell, start, cell_of);
         for (int j = 0; j < LANES && base + j < n; ++j)
             ++row[cell[j] >= 0 ? cell[j] : spare + j];
     }
+    row[spare + LANES] = k - first;
 }
 
 /* Pass 2's look-ahead for its scattered writes. Against none, interleaved in one process, medians of 11,
@@ -694,10 +730,12 @@ __kernel void exact_bin_count_ends(BIN_ARGS, __global const float8 *planes, int 
  * outside its cell: it is not written but counted in *dropped, which the host checks. Two ways, after
  * pass 1's two:
  *   exact_bin_fill       per receiver, its place offsets[cell] + slot[i] (exact_bin_count's atomic ranks).
- *   exact_bin_fill_ends  exact_bin_count_ends' two work-items replay their halves in the same order, each
- *                        taking its cell's places from its row of counts down to zero: the first half
- *                        from the cell's front, the second from its back. No slot per receiver to write
- *                        and read back (4 bytes each way), and no atomics; the counts end at zero. */
+ *   exact_bin_fill_ends  exact_bin_count_ends' two work-items replay their packed walkers (start, already
+ *                        tagged, and cell_of) in the same order, each taking its cell's places from its
+ *                        row of counts down to zero: the first half from the cell's front, the second
+ *                        from its back. No slot per receiver to write and read back (4 bytes each way),
+ *                        no atomics, and nothing read of the receivers needing no walk; the counts end
+ *                        at zero. */
 __kernel void exact_bin_fill(int n, __global const Start *start, __global const int *slot,
                              __global const int *counts, __global const int *offsets, __global Start *binned,
                              __global volatile int *dropped)
@@ -722,32 +760,28 @@ __kernel void exact_bin_fill(int n, __global const Start *start, __global const 
     }
 }
 
-__kernel void exact_bin_fill_ends(int n, int per_end, __global const Start *start, __global int *counts,
-                                  int second_row, __global const int *offsets, __global Start *binned,
-                                  __global volatile int *dropped)
+__kernel void exact_bin_fill_ends(int per_end, __global const Start *start, __global const int *cell_of,
+                                  __global int *counts, int second_row, __global const int *offsets,
+                                  __global Start *binned, __global volatile int *dropped)
 {
     const int end = get_global_id(0);
-    const int last = SC_IMIN(n, (end + 1) * per_end * LANES);
     __global int *row = counts + end * second_row;
+    const int first = end * per_end * LANES, last = first + row[second_row - 1];   /* its packed walkers */
     int lost = 0;
-    for (int i = end * per_end * LANES; i < last; ++i) {
-        const int ahead = i + FILL_AHEAD;
+    for (int k = first; k < last; ++k) {
+        const int ahead = k + FILL_AHEAD;
         if (ahead < last) {
-            const int c = start[ahead].tag;       /* its place as it stands now: the same line or the next */
-            if (c >= 0)
-                SC_PREFETCH(binned + (end ? offsets[c + 1] - row[c] : offsets[c] + row[c] - 1), 1);
+            const int c = cell_of[ahead];         /* its place as it stands now: the same line or the next */
+            SC_PREFETCH(binned + (end ? offsets[c + 1] - row[c] : offsets[c] + row[c] - 1), 1);
         }
-        const Start r = start[i];
-        if (r.tag < 0)
-            continue;
-        const int left = row[r.tag] - 1;          /* this end's places left in the cell after this one */
+        const int c = cell_of[k];
+        const int left = row[c] - 1;              /* this end's places left in the cell after this one */
         if (left < 0) {
             ++lost;
             continue;
         }
-        row[r.tag] = left;
-        const Start tagged = {r.x, r.y, r.z, i};
-        binned[end ? offsets[r.tag + 1] - 1 - left : offsets[r.tag] + left] = tagged;
+        row[c] = left;
+        binned[end ? offsets[c + 1] - 1 - left : offsets[c] + left] = start[k];
     }
     if (lost)
         atomic_add(dropped, lost);

@@ -196,7 +196,13 @@ def test_receiver_binning_that_drops_receivers_raises(device, monkeypatch, both_
         def run(queue, gsize, lsize, *args):
             kernel(queue, gsize, lsize, *args)
             counts = args[counts_at[name]]
-            cl.enqueue_fill_buffer(queue, counts, np.int32(1), 0, counts.size // 4 * 4)
+            if name == "exact_bin_count":
+                cl.enqueue_fill_buffer(queue, counts, np.int32(1), 0, counts.size // 4 * 4)
+                return
+            cells = int(args[17]) + 1                # two rows of the cells (brute_cell, the 18th of BIN_ARGS, is
+            row = cells + exact_module.BIN_LANES + 1  # the last), a counter per lane and the walkers' count
+            for end in (0, 1):
+                cl.enqueue_fill_buffer(queue, counts, np.int32(1), 4 * end * row, 4 * cells)
         return run
 
     monkeypatch.setattr(type(device), "kernel", cut_counts)
@@ -596,25 +602,45 @@ def test_receivers_at_the_light_are_answered_by_the_method(device, rng, order, v
     assert np.array_equal(public, at)
 
 
+@pytest.mark.parametrize("both_ends", [False, True], ids=["atomic", "both-ends"])
 @pytest.mark.parametrize("light_name", sorted(LIGHTS))
-def test_the_count_pass_bins_each_receiver_in_the_cell_point_cells_gives(device, rng, light_name):
+def test_the_count_pass_bins_each_receiver_in_the_cell_point_cells_gives(device, rng, monkeypatch, light_name,
+                                                                         both_ends):
     """The count pass finds 8 receivers' cells at once, over lanes (ls_point_cells over lfloat: a cube
     face's parameters picked by selects); lightspace.point_cells finds one point's, the same function over
     a float (checked against the NumPy reference in test_lightspace). Every walked receiver's record must
-    name the cell point_cells gives its start, bit for bit, inside the window and far outside it."""
+    name the cell point_cells gives its start, bit for bit, inside the window and far outside it. The
+    atomic count writes every receiver's record at its index, tagged with its cell; the count from both
+    ends packs each end's walkers from its first receiver on, tagged with their index, their cells beside."""
     from shadowcl import lightspace
+    monkeypatch.setattr(exact_module, "bins_from_both_ends", lambda cl_device: both_ends)
     mesh = soup_mesh(rng, 150, 0.1)
-    points = np.concatenate([rng.uniform(-1.5, 1.5, (4000, 3)), rng.uniform(-60, 60, (1003, 3))])
+    n = 5003
+    points = np.concatenate([rng.uniform(-1.5, 1.5, (4000, 3)), rng.uniform(-60, 60, (n - 4000, 3))])
     bounds = np.array([[-1.5, -1.5, -1.5], [1.5, 1.5, 1.5]])
     # every receiver walked (no plane answers one in the count pass), so that nearly all have records
     mask, method = classify(mesh, LIGHTS[light_name], points, device=device, receiver_bounds=bounds, planes=False)
-    records = device.from_device(device.scratch("exact: receiver starts", 16 * len(points)), (len(points), 4), np.float32)
-    cells = records[:, 3].view(np.int32)
-    walked = cells >= 0
-    assert walked.mean() > 0.9
-    fine, _, w = lightspace.point_cells(device, method.grid, records[walked, :3])
+    records = device.from_device(device.scratch("exact: receiver starts", 16 * n), (n, 4), np.float32)
+    if both_ends:
+        cells = device.from_device(device.scratch("exact: walkers' cells", 4 * n), n, np.int32)
+        row = method.grid.cells + 2 + exact_module.BIN_LANES
+        walkers = device.from_device(device.scratch("exact: receiver cell counts", 8 * row), 2 * row, np.int32)[row - 1::row]
+        first = 8 * -(-n // 16)                      # end 1's first receiver: half the packets, rounded up
+        packed = np.concatenate([np.arange(walkers[0]), first + np.arange(walkers[1])])
+        index = records[packed, 3].view(np.int32)
+        assert np.all(np.diff(index[:walkers[0]]) > 0) and np.all(np.diff(index[walkers[0]:]) > 0)
+        assert index[:walkers[0]].max() < first <= index[walkers[0]:].min()
+        codes = device.from_device(device.scratch("exact: classify output", n), n, np.uint8)
+        assert np.array_equal(index, np.flatnonzero(codes != exact_module.FAR)) and len(packed) > 0.9 * n
+        cells, starts = cells[packed], records[packed, :3]
+    else:
+        cells = records[:, 3].view(np.int32)
+        assert (cells >= 0).mean() > 0.9
+        cells, starts = cells[cells >= 0], records[cells >= 0, :3]
+    assert np.all(cells >= 0)
+    fine, _, w = lightspace.point_cells(device, method.grid, starts)
     behind = method.grid.cells                       # a point a single view cannot place: brute_cell
-    assert np.array_equal(cells[walked], np.where(w > 0, fine, behind) if method.grid.views.kind == "perspective" else fine)
+    assert np.array_equal(cells, np.where(w > 0, fine, behind) if method.grid.views.kind == "perspective" else fine)
 
 
 def test_shadow_mask_api_and_stats(device, rng):

@@ -75,7 +75,14 @@ receivers on the ground + 200 k on the model, random order, PoCL on 2 cores; ran
   slot per receiver is stored (against the slot array and a fill per receiver, 2026-12-07, alternating
   processes, medians of 3 rounds of 5, count + fill ms with / without normals: default 16.5 -> 14.3 /
   11.6 -> 12.0, light_inside 14.9 -> 13.2 / 15.1 -> 12.2, bunny 14.2 -> 12.4 / 9.9 -> 11.4: the count
-  1-2 ms cheaper everywhere, the serial fill up to 1.7 ms dearer without normals). Elsewhere
+  1-2 ms cheaper everywhere, the serial fill up to 1.7 ms dearer without normals). Each end writes
+  only its walkers' records, packed from its first receiver on, already tagged with their index, their
+  cells beside (kernels/exact.cl ``pack_walkers``): with most receivers decided by their cell's plane,
+  the fill reads nothing of the rest (against a record for every receiver, 2026-12-07, alternating
+  processes, medians of 11, fill / count / call ms with normals: default 1.17 -> 0.10 / 8.3 -> 9.6 /
+  18.0 -> 18.4, light_inside 2.7 -> 0.6 / 8.9 -> 10.1 / 21.6 -> 20.9, city_block 5.3 -> 1.7 / 9.5 ->
+  10.5 / 26.5 -> 24.7; without normals the calls 20.7 -> 19.6, 26.0 -> 23.2, 26.2 -> 24.3; bunny, ogre
+  and teapot within +-1.1; the same masks). Elsewhere
   atomic_inc per receiver, last and back to back: a locked operation drains the stores
   before it, and interleaved with the records' stores the pass took 20.5-21.4 ms against 15.0-15.4. (Earlier, 2026-12-02: scattering the start instead of re-reading float64 points and
   normals in pass 2 took the fill from 126-448 to 40-172 ms on a loaded machine; the walk gathering
@@ -612,15 +619,16 @@ class ExactMethod(Method):
                 self.lists.fine_masks, walk_coarse, behind, out_dev)
             return dev.from_device(out_dev, n, np.uint8), int(dev.from_device(behind, 1, np.int32)[0]), n
         rows = 2 if self._both_ends else 1
-        row = brute_cell + 1 + BIN_LANES              # a row of counts: every cell, then the non-walkers by lane
+        row = brute_cell + 2 + BIN_LANES    # a row of counts: every cell, the non-walkers by lane, the walkers
         counts = dev.scratch("exact: receiver cell counts", 4 * row * rows)
         cl.enqueue_fill_buffer(queue, counts, np.int32(0), 0, 4 * row * rows)
-        start = dev.scratch("exact: receiver starts", 16 * n)          # (s, cell) per receiver: kernels/exact.cl Start
+        start = dev.scratch("exact: receiver starts", 16 * n)          # kernels/exact.cl Start
         packets = -(-n // BIN_LANES)
         per_end = np.int32(-(-packets // 2))
         if self._both_ends:
+            cell_of = dev.scratch("exact: walkers' cells", 4 * n)
             dev.kernel("exact.cl", "exact_bin_count_ends", options)(
-                queue, (2,), (1,), *bin_args, *planes, per_end, counts, out_dev, start)
+                queue, (2,), (1,), *bin_args, *planes, per_end, counts, out_dev, start, cell_of)
         else:
             slot = dev.scratch("exact: receiver slots", 4 * n)
             dev.kernel("exact.cl", "exact_bin_count", options)(queue, (packets,), None, *bin_args, *planes, counts, slot,
@@ -636,7 +644,7 @@ class ExactMethod(Method):
             cl.enqueue_fill_buffer(queue, dropped, np.int32(0), 0, 4)
             if self._both_ends:
                 dev.kernel("exact.cl", "exact_bin_fill_ends", options)(
-                    queue, (2,), (1,), np.int32(n), per_end, start, counts, np.int32(row), offsets, by_cell, dropped)
+                    queue, (2,), (1,), per_end, start, cell_of, counts, np.int32(row), offsets, by_cell, dropped)
             else:
                 dev.kernel("exact.cl", "exact_bin_fill", options)(queue, (n,), None, np.int32(n), start, slot, counts,
                                                                   offsets, by_cell, dropped)
